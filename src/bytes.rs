@@ -1,0 +1,113 @@
+//! A bounds-checked little-endian cursor over a byte slice. Every read that would pass the end
+//! returns `Truncated` with the absolute file offset instead of panicking.
+
+use crate::error::{Error, ErrorKind, Result};
+
+pub struct ByteReader<'a> {
+    data: &'a [u8],
+    pos: usize,
+    /// Absolute offset of `data[0]` in the file, for error messages.
+    base: u64,
+}
+
+impl<'a> ByteReader<'a> {
+    pub fn new(data: &'a [u8], base: u64) -> Self {
+        ByteReader { data, pos: 0, base }
+    }
+    pub fn offset(&self) -> u64 {
+        self.base + self.pos as u64
+    }
+    pub fn remaining(&self) -> usize {
+        self.data.len() - self.pos
+    }
+    pub fn err(&self, kind: ErrorKind) -> Error {
+        Error::new(kind, self.offset())
+    }
+    pub fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8]> {
+        if n > self.remaining() {
+            return Err(self.err(ErrorKind::Truncated {
+                what,
+                needed: n as u64,
+                available: self.remaining() as u64,
+            }));
+        }
+        let s = &self.data[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    pub fn rest(&mut self) -> &'a [u8] {
+        let s = &self.data[self.pos..];
+        self.pos = self.data.len();
+        s
+    }
+    pub fn u8(&mut self, what: &'static str) -> Result<u8> {
+        Ok(self.take(1, what)?[0])
+    }
+    pub fn u16(&mut self, what: &'static str) -> Result<u16> {
+        let b = self.take(2, what)?;
+        Ok(u16::from_le_bytes([b[0], b[1]]))
+    }
+    pub fn u32(&mut self, what: &'static str) -> Result<u32> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes(b.try_into().expect("4 bytes")))
+    }
+    pub fn u64(&mut self, what: &'static str) -> Result<u64> {
+        let b = self.take(8, what)?;
+        Ok(u64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+    pub fn f32(&mut self, what: &'static str) -> Result<f32> {
+        Ok(f32::from_bits(self.u32(what)?))
+    }
+    /// A finite f32 (rejects NaN and infinities).
+    pub fn finite_f32(&mut self, what: &'static str) -> Result<f32> {
+        let at = self.offset();
+        let v = self.f32(what)?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(Error::new(ErrorKind::NonFinite { field: what }, at))
+        }
+    }
+    /// `n` little-endian f32 values; the length is checked before allocating.
+    pub fn f32_vec(&mut self, n: usize, what: &'static str) -> Result<Vec<f32>> {
+        let bytes = n.checked_mul(4).ok_or_else(|| {
+            self.err(ErrorKind::InvalidField { field: what, value: n as u64, reason: "count overflows" })
+        })?;
+        let b = self.take(bytes, what)?;
+        Ok(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect())
+    }
+}
+
+/// Little-endian appends, the writer-side counterpart of [`ByteReader`].
+pub trait PutLe {
+    fn put_u8(&mut self, v: u8);
+    fn put_u16(&mut self, v: u16);
+    fn put_u32(&mut self, v: u32);
+    fn put_u64(&mut self, v: u64);
+    fn put_f32(&mut self, v: f32);
+    fn put_f32s(&mut self, v: &[f32]);
+}
+
+impl PutLe for Vec<u8> {
+    fn put_u8(&mut self, v: u8) {
+        self.push(v);
+    }
+    fn put_u16(&mut self, v: u16) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_u32(&mut self, v: u32) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_u64(&mut self, v: u64) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_f32(&mut self, v: f32) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_f32s(&mut self, v: &[f32]) {
+        self.reserve(v.len() * 4);
+        for x in v {
+            self.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+}

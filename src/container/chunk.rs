@@ -1,0 +1,119 @@
+//! Chunk framing (format-spec §3): a 24-byte header with its own CRC, the payload, and a
+//! CRC-32C of the payload.
+
+use std::fmt;
+
+use crate::bytes::ByteReader;
+use crate::error::{Error, ErrorKind, Result};
+
+/// A four-byte chunk type, e.g. `HEAD`. Bytes are ASCII letters, digits, or space.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ChunkType(pub [u8; 4]);
+
+impl ChunkType {
+    pub const HEAD: ChunkType = ChunkType(*b"HEAD");
+    pub const META: ChunkType = ChunkType(*b"META");
+    pub const GOPH: ChunkType = ChunkType(*b"GOPH");
+    pub const GIDX: ChunkType = ChunkType(*b"GIDX");
+    pub const TAIL: ChunkType = ChunkType(*b"TAIL");
+    /// Raw (uncompressed-float) canonical Gaussians, §6.1.
+    pub const CRAW: ChunkType = ChunkType(*b"CRAW");
+
+    pub fn is_valid(bytes: [u8; 4]) -> bool {
+        bytes.iter().all(|b| b.is_ascii_alphanumeric() || *b == b' ')
+    }
+    pub fn as_str(&self) -> &str {
+        std::str::from_utf8(&self.0).unwrap_or("????")
+    }
+}
+
+impl fmt::Display for ChunkType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl fmt::Debug for ChunkType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ChunkType({})", self.as_str())
+    }
+}
+
+/// Flag bit 0: a reader that does not know this chunk type must stop with an error.
+pub const FLAG_MUST_UNDERSTAND: u16 = 1;
+/// `gop` field value for chunks that belong to the scene, not to one GOP.
+pub const SCENE_LEVEL: u32 = u32::MAX;
+/// Size of the fixed chunk header.
+pub const CHUNK_HEADER_LEN: u64 = 24;
+/// Size of the payload CRC that follows every payload.
+pub const CHUNK_TRAILER_LEN: u64 = 4;
+/// Bytes a chunk adds around its payload.
+pub const CHUNK_OVERHEAD: u64 = CHUNK_HEADER_LEN + CHUNK_TRAILER_LEN;
+
+/// A parsed chunk header plus where it sits in the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChunkInfo {
+    pub ty: ChunkType,
+    pub flags: u16,
+    pub gop: u32,
+    /// Payload length in bytes.
+    pub len: u64,
+    /// Absolute offset of the chunk header.
+    pub offset: u64,
+}
+
+impl ChunkInfo {
+    pub fn must_understand(&self) -> bool {
+        self.flags & FLAG_MUST_UNDERSTAND != 0
+    }
+    pub fn payload_offset(&self) -> u64 {
+        self.offset + CHUNK_HEADER_LEN
+    }
+    /// Offset of the byte after this chunk (header + payload + CRC).
+    pub fn end(&self) -> u64 {
+        self.offset + CHUNK_OVERHEAD + self.len
+    }
+}
+
+pub fn encode_header(ty: ChunkType, flags: u16, gop: u32, len: u64) -> [u8; 24] {
+    let mut h = [0u8; 24];
+    h[0..4].copy_from_slice(&ty.0);
+    h[4..6].copy_from_slice(&flags.to_le_bytes());
+    // bytes 6..8 reserved, zero
+    h[8..12].copy_from_slice(&gop.to_le_bytes());
+    h[12..20].copy_from_slice(&len.to_le_bytes());
+    let crc = crc32c::crc32c(&h[0..20]);
+    h[20..24].copy_from_slice(&crc.to_le_bytes());
+    h
+}
+
+/// Parse and verify a 24-byte chunk header found at absolute `offset`.
+pub fn decode_header(h: &[u8; 24], offset: u64) -> Result<ChunkInfo> {
+    let mut r = ByteReader::new(h, offset);
+    let ty: [u8; 4] = r.take(4, "chunk type")?.try_into().expect("4 bytes");
+    let flags = r.u16("chunk flags")?;
+    let _reserved = r.u16("chunk reserved")?;
+    let gop = r.u32("chunk gop")?;
+    let len = r.u64("chunk length")?;
+    let stored = r.u32("chunk header crc")?;
+    let computed = crc32c::crc32c(&h[0..20]);
+    if stored != computed {
+        return Err(Error::new(ErrorKind::HeaderCrc { stored, computed }, offset + 20));
+    }
+    if !ChunkType::is_valid(ty) {
+        return Err(Error::new(ErrorKind::InvalidChunkType(ty), offset));
+    }
+    Ok(ChunkInfo { ty: ChunkType(ty), flags, gop, len, offset })
+}
+
+/// Verify a payload against the CRC stored after it.
+pub fn check_payload_crc(info: &ChunkInfo, payload: &[u8], stored: u32) -> Result<()> {
+    let computed = crc32c::crc32c(payload);
+    if computed != stored {
+        return Err(Error::new(
+            ErrorKind::PayloadCrc { chunk: info.ty, stored, computed },
+            info.payload_offset() + info.len,
+        ));
+    }
+    Ok(())
+}

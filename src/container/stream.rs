@@ -1,0 +1,219 @@
+//! In-order reader over a plain `Read` (§9.2), e.g. a network stream: yields scene chunks, then
+//! each GOP's chunks as their bytes arrive. Every structural rule the random-access reader
+//! checks is checked here too, and the final `GIDX` must agree with what was seen.
+
+use std::io::Read;
+
+use crate::bytes::ByteReader;
+use crate::container::chunk::{check_payload_crc, decode_header, ChunkInfo, ChunkType, CHUNK_HEADER_LEN, SCENE_LEVEL};
+use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
+use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
+use crate::container::is_known_chunk;
+use crate::error::{io_err, Error, ErrorKind, Result};
+use crate::limits::Limits;
+
+/// What the stream produced next.
+#[derive(Debug)]
+pub enum StreamEvent {
+    /// A known scene-level chunk, before the first GOP.
+    SceneChunk(ChunkInfo, Vec<u8>),
+    /// GOP `g` starts.
+    GopStart(u32, GopHeader),
+    /// A known payload chunk of the current GOP.
+    GopChunk(ChunkInfo, Vec<u8>),
+    /// The index at the end; the stream is complete after this.
+    End(GopIndex),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    Scene,
+    InGop(u32),
+    AfterIndex,
+    Done,
+}
+
+pub struct StreamReader<R: Read> {
+    inner: R,
+    pos: u64,
+    limits: Limits,
+    scene: SceneHeader,
+    state: State,
+    seen: Vec<IndexEntry>,
+    scene_chunks: u32,
+    gop_chunks: u32,
+    gidx_offset: u64,
+}
+
+impl<R: Read> StreamReader<R> {
+    pub fn new(inner: R) -> Result<Self> {
+        Self::with_limits(inner, Limits::default())
+    }
+
+    pub fn with_limits(inner: R, limits: Limits) -> Result<Self> {
+        let mut s = StreamReader {
+            inner,
+            pos: 0,
+            limits,
+            scene: SceneHeader::still(0, 0),
+            state: State::Scene,
+            seen: Vec::new(),
+            scene_chunks: 0,
+            gop_chunks: 0,
+            gidx_offset: 0,
+        };
+        let sig = s.read_exact_vec(SIGNATURE_LEN as usize, "signature")?;
+        decode_signature(&sig)?;
+        let (head, p) = s.read_chunk()?;
+        if head.ty != ChunkType::HEAD || head.gop != SCENE_LEVEL {
+            return Err(Error::new(ErrorKind::Order("the first chunk must be a scene-level HEAD"), head.offset));
+        }
+        s.scene = SceneHeader::decode(&p, head.payload_offset(), &s.limits)?;
+        Ok(s)
+    }
+
+    pub fn scene(&self) -> &SceneHeader {
+        &self.scene
+    }
+    /// Bytes consumed so far.
+    pub fn position(&self) -> u64 {
+        self.pos
+    }
+
+    fn read_exact_vec(&mut self, n: usize, what: &'static str) -> Result<Vec<u8>> {
+        let mut buf = Vec::new();
+        // `take` + `read_to_end` grows the buffer only as bytes really arrive.
+        let got = self.inner.by_ref().take(n as u64).read_to_end(&mut buf).map_err(|e| io_err(e, self.pos, what))?;
+        if got < n {
+            return Err(Error::new(ErrorKind::Truncated { what, needed: n as u64, available: got as u64 }, self.pos));
+        }
+        self.pos += n as u64;
+        Ok(buf)
+    }
+
+    fn read_header(&mut self) -> Result<ChunkInfo> {
+        let at = self.pos;
+        let h = self.read_exact_vec(CHUNK_HEADER_LEN as usize, "chunk header")?;
+        let info = decode_header(h.as_slice().try_into().expect("24 bytes"), at)?;
+        if info.len > self.limits.max_chunk_len {
+            return Err(Error::new(ErrorKind::LimitExceeded { what: "chunk length", value: info.len, limit: self.limits.max_chunk_len }, at + 12));
+        }
+        Ok(info)
+    }
+
+    fn read_payload(&mut self, info: &ChunkInfo) -> Result<Vec<u8>> {
+        let p = self.read_exact_vec(info.len as usize, "chunk payload")?;
+        let c = self.read_exact_vec(4, "payload CRC")?;
+        check_payload_crc(info, &p, u32::from_le_bytes(c.try_into().expect("4 bytes")))?;
+        Ok(p)
+    }
+
+    fn read_chunk(&mut self) -> Result<(ChunkInfo, Vec<u8>)> {
+        let info = self.read_header()?;
+        let p = self.read_payload(&info)?;
+        Ok((info, p))
+    }
+
+    fn close_gop(&mut self, end: u64) {
+        if let Some(e) = self.seen.last_mut() {
+            if e.length == 0 {
+                e.length = end - e.offset;
+            }
+        }
+    }
+
+    /// The next event, or `None` after the stream ended cleanly.
+    pub fn next_event(&mut self) -> Result<Option<StreamEvent>> {
+        loop {
+            match self.state {
+                State::Done => return Ok(None),
+                State::AfterIndex => {
+                    let (c, p) = self.read_chunk()?;
+                    if c.ty != ChunkType::TAIL || c.gop != SCENE_LEVEL {
+                        return Err(Error::new(ErrorKind::Order("GIDX must be followed by TAIL"), c.offset));
+                    }
+                    let off = ByteReader::new(&p, c.payload_offset()).u64("TAIL gidx offset")?;
+                    if off != self.gidx_offset {
+                        return Err(Error::new(ErrorKind::Index("TAIL does not point at GIDX"), c.payload_offset()));
+                    }
+                    let mut extra = [0u8; 1];
+                    let n = self.inner.read(&mut extra).map_err(|e| io_err(e, self.pos, "end of file"))?;
+                    if n != 0 {
+                        return Err(Error::new(ErrorKind::Order("bytes after TAIL"), self.pos));
+                    }
+                    self.state = State::Done;
+                    return Ok(None);
+                }
+                State::Scene | State::InGop(_) => {}
+            }
+            let c = self.read_header()?;
+            let current = match self.state {
+                State::InGop(g) => Some(g),
+                _ => None,
+            };
+            let next_gop = current.map_or(0, |g| g + 1);
+            match c.ty {
+                ChunkType::GOPH => {
+                    if c.gop != next_gop || next_gop >= self.scene.gop_count {
+                        return Err(Error::new(ErrorKind::Order("GOPH out of sequence"), c.offset));
+                    }
+                    let p = self.read_payload(&c)?;
+                    let gh = GopHeader::decode(&p, c.payload_offset())?;
+                    gh.validate(&self.scene, c.gop, c.payload_offset())?;
+                    self.close_gop(c.offset);
+                    self.seen.push(IndexEntry { gop: c.gop, header: gh, offset: c.offset, length: 0 });
+                    self.state = State::InGop(c.gop);
+                    self.gop_chunks = 0;
+                    return Ok(Some(StreamEvent::GopStart(c.gop, gh)));
+                }
+                ChunkType::GIDX => {
+                    if c.gop != SCENE_LEVEL || next_gop != self.scene.gop_count {
+                        return Err(Error::new(ErrorKind::Order("GIDX before the last GOP"), c.offset));
+                    }
+                    let p = self.read_payload(&c)?;
+                    self.close_gop(c.offset);
+                    let gops_start = self.seen.first().map_or(c.offset, |e| e.offset);
+                    let idx = GopIndex::decode(&p, c.payload_offset(), &self.scene, gops_start, c.offset)?;
+                    if idx.entries != self.seen {
+                        return Err(Error::new(ErrorKind::Index("GIDX disagrees with the GOPs in the stream"), c.payload_offset()));
+                    }
+                    self.gidx_offset = c.offset;
+                    self.state = State::AfterIndex;
+                    return Ok(Some(StreamEvent::End(idx)));
+                }
+                ChunkType::HEAD | ChunkType::TAIL => {
+                    return Err(Error::new(ErrorKind::Order("HEAD/TAIL in the body"), c.offset));
+                }
+                _ => {}
+            }
+            let expected_gop = current.unwrap_or(SCENE_LEVEL);
+            if c.gop != expected_gop {
+                return Err(Error::new(ErrorKind::Order("chunk GOP number does not match its position"), c.offset + 8));
+            }
+            if c.must_understand() && !is_known_chunk(c.ty) {
+                return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
+            }
+            let (count, limit, what) = match current {
+                None => {
+                    self.scene_chunks += 1;
+                    (self.scene_chunks, self.limits.max_scene_chunks, "scene-level chunks")
+                }
+                Some(_) => {
+                    self.gop_chunks += 1;
+                    (self.gop_chunks, self.limits.max_chunks_per_gop, "chunks per GOP")
+                }
+            };
+            if count > limit {
+                return Err(Error::new(ErrorKind::LimitExceeded { what, value: count as u64, limit: limit as u64 }, c.offset));
+            }
+            let p = self.read_payload(&c)?;
+            if !is_known_chunk(c.ty) {
+                continue; // unknown ancillary: skipped after its CRC was checked
+            }
+            return Ok(Some(match current {
+                None => StreamEvent::SceneChunk(c, p),
+                Some(_) => StreamEvent::GopChunk(c, p),
+            }));
+        }
+    }
+}

@@ -1,0 +1,19 @@
+//! `dlgs`: the `.dlgs` container format and scene model for streaming language-embedded
+//! dynamic Gaussian splatting video (DLGStream).
+//!
+//! The byte-level specification is `format-spec/dlgs.md`; every reader here enforces it.
+//! This crate has no FFI and no `unsafe`.
+#![forbid(unsafe_code)]
+
+pub mod bytes;
+pub mod container;
+pub mod error;
+pub mod interop;
+pub mod limits;
+pub mod model;
+pub mod payload;
+
+pub use container::{ChunkType, FileReader, SceneHeader, StreamReader, Writer};
+pub use error::{Error, ErrorKind, Result};
+pub use limits::Limits;
+pub use model::{Canonical, Gaussians};
