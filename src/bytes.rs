@@ -71,10 +71,16 @@ impl<'a> ByteReader<'a> {
     /// `n` little-endian f32 values; the length is checked before allocating.
     pub fn f32_vec(&mut self, n: usize, what: &'static str) -> Result<Vec<f32>> {
         let bytes = n.checked_mul(4).ok_or_else(|| {
-            self.err(ErrorKind::InvalidField { field: what, value: n as u64, reason: "count overflows" })
+            self.err(ErrorKind::InvalidField {
+                field: what,
+                value: n as u64,
+                reason: "count overflows",
+            })
         })?;
         let b = self.take(bytes, what)?;
-        Ok(b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect())
+        Ok(b.chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect())
     }
 }
 

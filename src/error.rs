@@ -18,13 +18,23 @@ pub enum ErrorKind {
     UnsupportedVersion { major: u16, minor: u16 },
     /// Fewer bytes are present than a structure declares.
     #[error("truncated: {what} needs {needed} bytes, {available} available")]
-    Truncated { what: &'static str, needed: u64, available: u64 },
+    Truncated {
+        what: &'static str,
+        needed: u64,
+        available: u64,
+    },
     /// §3: the CRC-32C of a chunk header does not match.
     #[error("chunk header CRC mismatch (stored {stored:#010x}, computed {computed:#010x})")]
     HeaderCrc { stored: u32, computed: u32 },
     /// §3: the CRC-32C of a chunk payload does not match.
-    #[error("payload CRC mismatch in chunk {chunk} (stored {stored:#010x}, computed {computed:#010x})")]
-    PayloadCrc { chunk: ChunkType, stored: u32, computed: u32 },
+    #[error(
+        "payload CRC mismatch in chunk {chunk} (stored {stored:#010x}, computed {computed:#010x})"
+    )]
+    PayloadCrc {
+        chunk: ChunkType,
+        stored: u32,
+        computed: u32,
+    },
     /// §3: chunk type bytes are not in the allowed alphabet.
     #[error("invalid chunk type bytes {0:02x?}")]
     InvalidChunkType([u8; 4]),
@@ -39,13 +49,21 @@ pub enum ErrorKind {
     MissingChunk(ChunkType),
     /// A field holds a value outside its allowed range.
     #[error("field {field} = {value}: {reason}")]
-    InvalidField { field: &'static str, value: u64, reason: &'static str },
+    InvalidField {
+        field: &'static str,
+        value: u64,
+        reason: &'static str,
+    },
     /// A float field is NaN or infinite where the spec requires a finite value.
     #[error("field {field} is not finite")]
     NonFinite { field: &'static str },
     /// A declared size exceeds a configured limit (see [`crate::Limits`]).
     #[error("limit exceeded: {what} = {value} > {limit}")]
-    LimitExceeded { what: &'static str, value: u64, limit: u64 },
+    LimitExceeded {
+        what: &'static str,
+        value: u64,
+        limit: u64,
+    },
     /// §5: the GOP index disagrees with the chunks it points to.
     #[error("GOP index: {0}")]
     Index(&'static str),
@@ -57,7 +75,10 @@ pub enum ErrorKind {
     Decompress(String),
     /// A foreign splat file (PLY, .splat, SPZ) is malformed.
     #[error("{format}: {reason}")]
-    Foreign { format: &'static str, reason: String },
+    Foreign {
+        format: &'static str,
+        reason: String,
+    },
     /// An I/O error from the underlying reader or writer.
     #[error("I/O: {0}")]
     Io(String),
@@ -123,7 +144,14 @@ pub type Result<T> = std::result::Result<T, Error>;
 /// Turn an `io::Error` at `offset` into our error; an unexpected EOF is a truncation.
 pub(crate) fn io_err(e: std::io::Error, offset: u64, what: &'static str) -> Error {
     if e.kind() == std::io::ErrorKind::UnexpectedEof {
-        Error::new(ErrorKind::Truncated { what, needed: 0, available: 0 }, offset)
+        Error::new(
+            ErrorKind::Truncated {
+                what,
+                needed: 0,
+                available: 0,
+            },
+            offset,
+        )
     } else {
         Error::new(ErrorKind::Io(e.to_string()), offset)
     }

@@ -1,1 +1,285 @@
-fn main(){}
+//! `dlgs`: encode, inspect, decode and render `.dlgs` streams.
+
+mod cameras_arg;
+mod info;
+mod scene_io;
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use dlgs::payload::raw_canonical::RawCodec;
+use dlgs_encoder::EncoderConfig;
+use dlgs_render::{image_out, metrics, render, RenderOptions};
+
+use cameras_arg::{cameras_to_json, CameraArgs};
+
+#[derive(Parser)]
+#[command(
+    name = "dlgs",
+    version,
+    about = "Codec for language-embedded dynamic Gaussian splatting video (.dlgs)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Show a .dlgs file's header, GOP table and bytes per chunk type and per frame.
+    Info {
+        file: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Read every chunk of a .dlgs file and check every CRC and index entry.
+    Verify { file: PathBuf },
+    /// Encode a splat scene (PLY, .splat, SPZ) into a single-frame .dlgs.
+    Encode {
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Store raw floats without zstd.
+        #[arg(long)]
+        no_zstd: bool,
+        /// zstd level for raw canonical chunks.
+        #[arg(long, default_value_t = 9)]
+        zstd_level: i32,
+    },
+    /// Decode the Gaussians shown at time t into an INRIA PLY (with language extras if present).
+    Decode {
+        file: PathBuf,
+        /// Time in seconds.
+        #[arg(long, default_value_t = 0.0)]
+        t: f64,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Render a scene (.dlgs at time t, or PLY / .splat / SPZ) to PNG.
+    Render {
+        scene: PathBuf,
+        #[command(flatten)]
+        cams: CameraArgs,
+        /// Time in seconds (for .dlgs).
+        #[arg(long, default_value_t = 0.0)]
+        t: f64,
+        /// Also render the language feature image (written as OUT.features.png and .f32).
+        #[arg(long)]
+        features: bool,
+        /// Background colour r,g,b in [0,1].
+        #[arg(long, default_value = "1,1,1")]
+        background: String,
+        /// Output PNG; with several cameras, `_NN` is inserted before the extension.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Render two scenes from the same cameras and print PSNR / SSIM per view.
+    Compare {
+        a: PathBuf,
+        b: PathBuf,
+        #[command(flatten)]
+        cams: CameraArgs,
+        #[arg(long, default_value_t = 0.0)]
+        t: f64,
+        #[arg(long, default_value = "1,1,1")]
+        background: String,
+        /// Write per-view error images (mean |A-B| over RGB, x4 gain) here.
+        #[arg(long)]
+        error_dir: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write the cameras a scene would be rendered with (orbit or selection) as cameras.json.
+    Cameras {
+        scene: PathBuf,
+        #[command(flatten)]
+        cams: CameraArgs,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+}
+
+fn parse_rgb(s: &str) -> Result<[f32; 3]> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .context("background must be r,g,b")?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        bail!("background must be three finite numbers r,g,b");
+    }
+    Ok([v[0], v[1], v[2]])
+}
+
+fn numbered(path: &std::path::Path, i: usize, n: usize) -> PathBuf {
+    if n == 1 {
+        return path.to_path_buf();
+    }
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("png");
+    path.with_file_name(format!("{stem}_{i:02}.{ext}"))
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.cmd {
+        Cmd::Info { file, json } => info::run_info(&file, json),
+        Cmd::Verify { file } => info::run_verify(&file),
+        Cmd::Encode {
+            input,
+            output,
+            no_zstd,
+            zstd_level,
+        } => {
+            let g = dlgs::interop::read_splat_file(&input)
+                .with_context(|| format!("reading {}", input.display()))?;
+            let cfg = EncoderConfig {
+                raw_codec: if no_zstd {
+                    RawCodec::None
+                } else {
+                    RawCodec::Zstd
+                },
+                zstd_level,
+                meta: Some(
+                    serde_json::json!({ "source": input.file_name().map(|s| s.to_string_lossy().to_string()), "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")) }),
+                ),
+            };
+            let f = std::fs::File::create(&output)
+                .with_context(|| format!("creating {}", output.display()))?;
+            dlgs_encoder::encode_still(&g, cfg, std::io::BufWriter::new(f))?;
+            let size = std::fs::metadata(&output)?.len();
+            let in_size = std::fs::metadata(&input)?.len();
+            println!(
+                "{} Gaussians (SH {}) -> {} ({size} bytes, {:.1}% of input, {:.2} bits/Gaussian)",
+                g.len(),
+                g.sh_degree,
+                output.display(),
+                100.0 * size as f64 / in_size as f64,
+                size as f64 * 8.0 / g.len().max(1) as f64
+            );
+            Ok(())
+        }
+        Cmd::Decode { file, t, output } => {
+            let g = scene_io::load_gaussians(&file, t)?;
+            std::fs::write(&output, dlgs::interop::ply::write_ply(&g)?)
+                .with_context(|| format!("writing {}", output.display()))?;
+            println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
+            Ok(())
+        }
+        Cmd::Render {
+            scene,
+            cams,
+            t,
+            features,
+            background,
+            output,
+        } => {
+            let g = scene_io::load_gaussians(&scene, t)?;
+            let cameras = cams.resolve(&g)?;
+            let opts = RenderOptions {
+                background: parse_rgb(&background)?,
+                features,
+            };
+            for (i, cam) in cameras.iter().enumerate() {
+                let img = render(&g, cam, &opts).map_err(anyhow::Error::msg)?;
+                let out = numbered(&output, i, cameras.len());
+                image_out::save_rgb_png(&out, &img.color, img.width, img.height)
+                    .map_err(anyhow::Error::msg)?;
+                if let Some(f) = &img.features {
+                    let fpng = out.with_extension("features.png");
+                    image_out::save_feature_png(&fpng, f, img.lang_width, 0, img.width, img.height)
+                        .map_err(anyhow::Error::msg)?;
+                    let raw: Vec<u8> = f.iter().flat_map(|v| v.to_le_bytes()).collect();
+                    std::fs::write(out.with_extension("features.f32"), raw)?;
+                }
+                println!(
+                    "{} {}x{}: {} visible Gaussians, {} tile pairs, {:.1} ms (project {:.1}, raster {:.1}) -> {}",
+                    cam.name,
+                    img.width,
+                    img.height,
+                    img.visible,
+                    img.pairs,
+                    img.timings.project_ms + img.timings.raster_ms,
+                    img.timings.project_ms,
+                    img.timings.raster_ms,
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        Cmd::Compare {
+            a,
+            b,
+            cams,
+            t,
+            background,
+            error_dir,
+            json,
+        } => {
+            let ga = scene_io::load_gaussians(&a, t)?;
+            let gb = scene_io::load_gaussians(&b, t)?;
+            let cameras = cams.resolve(&ga)?;
+            let opts = RenderOptions {
+                background: parse_rgb(&background)?,
+                features: false,
+            };
+            if let Some(d) = &error_dir {
+                std::fs::create_dir_all(d)?;
+            }
+            let mut rows = Vec::new();
+            for (i, cam) in cameras.iter().enumerate() {
+                let ia = render(&ga, cam, &opts).map_err(anyhow::Error::msg)?;
+                let ib = render(&gb, cam, &opts).map_err(anyhow::Error::msg)?;
+                let p = metrics::psnr(&ia.color, &ib.color);
+                let s = metrics::ssim(&ia.color, &ib.color, ia.width, ia.height);
+                if let Some(d) = &error_dir {
+                    let e = metrics::error_image(&ia.color, &ib.color);
+                    image_out::save_gray_png(
+                        &d.join(format!("error_{i:02}.png")),
+                        &e,
+                        ia.width,
+                        ia.height,
+                        0.0,
+                        0.25,
+                    )
+                    .map_err(anyhow::Error::msg)?;
+                }
+                if !json {
+                    println!("{:<12} PSNR {:>7.2} dB  SSIM {:.5}", cam.name, p, s);
+                }
+                rows.push((cam.name.clone(), p, s));
+            }
+            let n = rows.len() as f64;
+            let mp = rows.iter().map(|r| r.1).sum::<f64>() / n;
+            let ms = rows.iter().map(|r| r.2).sum::<f64>() / n;
+            if json {
+                let views: Vec<_> = rows
+                    .iter()
+                    .map(|(name, p, s)| serde_json::json!({"camera": name, "psnr": p, "ssim": s}))
+                    .collect();
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(
+                        &serde_json::json!({"views": views, "mean_psnr": mp, "mean_ssim": ms})
+                    )?
+                );
+            } else {
+                println!("{:<12} PSNR {:>7.2} dB  SSIM {:.5}", "mean", mp, ms);
+            }
+            Ok(())
+        }
+        Cmd::Cameras {
+            scene,
+            cams,
+            output,
+        } => {
+            let g = scene_io::load_gaussians(&scene, 0.0)?;
+            let cameras = cams.resolve(&g)?;
+            std::fs::write(&output, cameras_to_json(&cameras))?;
+            println!("{} cameras -> {}", cameras.len(), output.display());
+            Ok(())
+        }
+    }
+}

@@ -18,14 +18,22 @@ pub struct Decoder<R: Read + Seek> {
 
 impl Decoder<BufReader<File>> {
     pub fn open_path(path: impl AsRef<Path>) -> Result<Self> {
-        let f = File::open(path.as_ref()).map_err(|e| Error::new(ErrorKind::Io(format!("{}: {e}", path.as_ref().display())), 0))?;
+        let f = File::open(path.as_ref()).map_err(|e| {
+            Error::new(
+                ErrorKind::Io(format!("{}: {e}", path.as_ref().display())),
+                0,
+            )
+        })?;
         Self::new(BufReader::new(f), Limits::default())
     }
 }
 
 impl<R: Read + Seek> Decoder<R> {
     pub fn new(src: R, limits: Limits) -> Result<Self> {
-        Ok(Decoder { reader: FileReader::open_with_limits(src, limits)?, cached: None })
+        Ok(Decoder {
+            reader: FileReader::open_with_limits(src, limits)?,
+            cached: None,
+        })
     }
 
     pub fn scene(&self) -> &SceneHeader {
@@ -39,7 +47,13 @@ impl<R: Read + Seek> Decoder<R> {
     pub fn frame_index_at(&self, t: f64) -> Result<u32> {
         let s = self.scene();
         if !t.is_finite() || t < 0.0 || t > s.duration_seconds() {
-            return Err(Error::new(ErrorKind::Request(format!("time {t} s outside the stream [0, {:.4}] s", s.duration_seconds())), 0));
+            return Err(Error::new(
+                ErrorKind::Request(format!(
+                    "time {t} s outside the stream [0, {:.4}] s",
+                    s.duration_seconds()
+                )),
+                0,
+            ));
         }
         Ok(((t * s.fps()).floor() as u64).min(s.frame_count as u64 - 1) as u32)
     }
@@ -59,7 +73,12 @@ impl<R: Read + Seek> Decoder<R> {
         };
         let p = self.reader.payload(&craw)?;
         let limits = *self.reader.limits();
-        let c = Arc::new(raw_canonical::decode(&p, craw.payload_offset(), self.reader.scene(), &limits)?);
+        let c = Arc::new(raw_canonical::decode(
+            &p,
+            craw.payload_offset(),
+            self.reader.scene(),
+            &limits,
+        )?);
         self.cached = Some((g, c.clone()));
         Ok(c)
     }

@@ -22,7 +22,11 @@ pub struct EncoderConfig {
 
 impl Default for EncoderConfig {
     fn default() -> Self {
-        EncoderConfig { raw_codec: RawCodec::Zstd, zstd_level: 9, meta: None }
+        EncoderConfig {
+            raw_codec: RawCodec::Zstd,
+            zstd_level: 9,
+            meta: None,
+        }
     }
 }
 
@@ -36,7 +40,8 @@ impl<W: Write> StreamEncoder<W> {
     pub fn new(out: W, scene: SceneHeader, cfg: EncoderConfig) -> Result<Self> {
         let mut writer = Writer::new(out, scene)?;
         if let Some(meta) = &cfg.meta {
-            let bytes = serde_json::to_vec(meta).map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
+            let bytes = serde_json::to_vec(meta)
+                .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
             writer.scene_chunk(ChunkType::META, 0, &bytes)?;
         }
         Ok(StreamEncoder { writer, cfg })
@@ -45,7 +50,9 @@ impl<W: Write> StreamEncoder<W> {
     /// Append the next GOP, coded intra from its canonical Gaussians.
     pub fn push_intra_gop(&mut self, canon: &Canonical) -> Result<()> {
         let s = self.writer.scene();
-        if canon.statics.len() != s.n_static as usize || canon.dynamics.len() != s.n_dynamic as usize {
+        if canon.statics.len() != s.n_static as usize
+            || canon.dynamics.len() != s.n_dynamic as usize
+        {
             return Err(Error::new(
                 ErrorKind::InvalidInput(format!(
                     "GOP has {}/{} static/dynamic Gaussians, header declares {}/{}",
@@ -58,11 +65,17 @@ impl<W: Write> StreamEncoder<W> {
             ));
         }
         if canon.statics.sh_degree != s.sh_degree || canon.statics.lang_width != s.lang_width() {
-            return Err(Error::new(ErrorKind::InvalidInput("GOP layout differs from the header (SH degree or language width)".into()), 0));
+            return Err(Error::new(
+                ErrorKind::InvalidInput(
+                    "GOP layout differs from the header (SH degree or language width)".into(),
+                ),
+                0,
+            ));
         }
         let payload = raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?;
         self.writer.begin_gop()?;
-        self.writer.gop_chunk(ChunkType::CRAW, FLAG_MUST_UNDERSTAND, &payload)
+        self.writer
+            .gop_chunk(ChunkType::CRAW, FLAG_MUST_UNDERSTAND, &payload)
     }
 
     pub fn finish(self) -> Result<W> {
@@ -75,7 +88,11 @@ pub fn encode_still<W: Write>(g: &dlgs::Gaussians, cfg: EncoderConfig, out: W) -
     let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     if g.has_language() {
         // DLGStream's 9-dim feature is 3 levels x 3 dims; other widths are one level.
-        let (levels, dims) = if g.lang_width == 9 { (3, 3) } else { (1, g.lang_width as u8) };
+        let (levels, dims) = if g.lang_width == 9 {
+            (3, 3)
+        } else {
+            (1, g.lang_width as u8)
+        };
         scene.lang_levels = levels;
         scene.lang_dims = dims;
     }

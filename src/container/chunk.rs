@@ -20,7 +20,9 @@ impl ChunkType {
     pub const CRAW: ChunkType = ChunkType(*b"CRAW");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
-        bytes.iter().all(|b| b.is_ascii_alphanumeric() || *b == b' ')
+        bytes
+            .iter()
+            .all(|b| b.is_ascii_alphanumeric() || *b == b' ')
     }
     pub fn as_str(&self) -> &str {
         std::str::from_utf8(&self.0).unwrap_or("????")
@@ -98,12 +100,21 @@ pub fn decode_header(h: &[u8; 24], offset: u64) -> Result<ChunkInfo> {
     let stored = r.u32("chunk header crc")?;
     let computed = crc32c::crc32c(&h[0..20]);
     if stored != computed {
-        return Err(Error::new(ErrorKind::HeaderCrc { stored, computed }, offset + 20));
+        return Err(Error::new(
+            ErrorKind::HeaderCrc { stored, computed },
+            offset + 20,
+        ));
     }
     if !ChunkType::is_valid(ty) {
         return Err(Error::new(ErrorKind::InvalidChunkType(ty), offset));
     }
-    Ok(ChunkInfo { ty: ChunkType(ty), flags, gop, len, offset })
+    Ok(ChunkInfo {
+        ty: ChunkType(ty),
+        flags,
+        gop,
+        len,
+        offset,
+    })
 }
 
 /// Verify a payload against the CRC stored after it.
@@ -111,7 +122,11 @@ pub fn check_payload_crc(info: &ChunkInfo, payload: &[u8], stored: u32) -> Resul
     let computed = crc32c::crc32c(payload);
     if computed != stored {
         return Err(Error::new(
-            ErrorKind::PayloadCrc { chunk: info.ty, stored, computed },
+            ErrorKind::PayloadCrc {
+                chunk: info.ty,
+                stored,
+                computed,
+            },
             info.payload_offset() + info.len,
         ));
     }

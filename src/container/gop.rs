@@ -35,7 +35,11 @@ impl GopHeader {
     pub fn decode(p: &[u8], offset: u64) -> Result<Self> {
         let mut r = ByteReader::new(p, offset);
         if p.len() < GOPH_LEN {
-            return Err(r.err(ErrorKind::Truncated { what: "GOPH payload", needed: GOPH_LEN as u64, available: p.len() as u64 }));
+            return Err(r.err(ErrorKind::Truncated {
+                what: "GOPH payload",
+                needed: GOPH_LEN as u64,
+                available: p.len() as u64,
+            }));
         }
         Ok(GopHeader {
             first_frame: r.u32("first_frame")?,
@@ -53,23 +57,43 @@ impl GopHeader {
             (Sequential, g) => g - 1,
             (Parallel, _) => 0,
         };
-        GopHeader { first_frame: g * scene.gop_length, frame_count: scene.frames_in_gop(g), reference_gop, flags: 0 }
+        GopHeader {
+            first_frame: g * scene.gop_length,
+            frame_count: scene.frames_in_gop(g),
+            reference_gop,
+            flags: 0,
+        }
     }
 
     /// Check this GOPH against the scene header; `at` is the payload offset.
     pub fn validate(&self, scene: &SceneHeader, g: u32, at: u64) -> Result<()> {
         let want = GopHeader::expected(scene, g);
         let field = |f: &'static str, v: u32, reason: &'static str| {
-            Err(Error::new(ErrorKind::InvalidField { field: f, value: v as u64, reason }, at))
+            Err(Error::new(
+                ErrorKind::InvalidField {
+                    field: f,
+                    value: v as u64,
+                    reason,
+                },
+                at,
+            ))
         };
         if self.first_frame != want.first_frame {
             return field("first_frame", self.first_frame, "must be g * gop_length");
         }
         if self.frame_count != want.frame_count {
-            return field("frame_count", self.frame_count, "must match the scene's frame count for this GOP");
+            return field(
+                "frame_count",
+                self.frame_count,
+                "must match the scene's frame count for this GOP",
+            );
         }
         if self.reference_gop != want.reference_gop {
-            return field("reference_gop", self.reference_gop, "must follow the scene's residual mode");
+            return field(
+                "reference_gop",
+                self.reference_gop,
+                "must follow the scene's residual mode",
+            );
         }
         Ok(())
     }
@@ -109,16 +133,33 @@ impl GopIndex {
 
     /// Parse and validate against the scene header and the region where GOPs may lie:
     /// `[gops_start, gops_end)` (the bytes after the scene-level chunks and before `GIDX`).
-    pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, gops_start: u64, gops_end: u64) -> Result<Self> {
+    pub fn decode(
+        p: &[u8],
+        offset: u64,
+        scene: &SceneHeader,
+        gops_start: u64,
+        gops_end: u64,
+    ) -> Result<Self> {
         let mut r = ByteReader::new(p, offset);
         let at = r.offset();
         let n = r.u32("GIDX entry count")?;
         if n != scene.gop_count {
-            return Err(Error::new(ErrorKind::InvalidField { field: "GIDX entry count", value: n as u64, reason: "must equal gop_count" }, at));
+            return Err(Error::new(
+                ErrorKind::InvalidField {
+                    field: "GIDX entry count",
+                    value: n as u64,
+                    reason: "must equal gop_count",
+                },
+                at,
+            ));
         }
         let need = n as u64 * GIDX_ENTRY_LEN as u64;
         if need > r.remaining() as u64 {
-            return Err(r.err(ErrorKind::Truncated { what: "GIDX entries", needed: need, available: r.remaining() as u64 }));
+            return Err(r.err(ErrorKind::Truncated {
+                what: "GIDX entries",
+                needed: need,
+                available: r.remaining() as u64,
+            }));
         }
         let mut entries = Vec::with_capacity(n as usize);
         let mut expect_offset = gops_start;
@@ -134,28 +175,47 @@ impl GopIndex {
             let off = r.u64("GIDX offset")?;
             let length = r.u64("GIDX length")?;
             if gop != g {
-                return Err(Error::new(ErrorKind::Index("entries must be in GOP order 0, 1, ..."), at));
+                return Err(Error::new(
+                    ErrorKind::Index("entries must be in GOP order 0, 1, ..."),
+                    at,
+                ));
             }
             header.validate(scene, g, at)?;
             if off != expect_offset {
-                return Err(Error::new(ErrorKind::Index("GOPs must be contiguous, starting after the scene chunks"), at));
+                return Err(Error::new(
+                    ErrorKind::Index("GOPs must be contiguous, starting after the scene chunks"),
+                    at,
+                ));
             }
             let end = off.checked_add(length).filter(|e| *e <= gops_end);
             let Some(end) = end else {
-                return Err(Error::new(ErrorKind::Index("GOP range passes the start of GIDX"), at));
+                return Err(Error::new(
+                    ErrorKind::Index("GOP range passes the start of GIDX"),
+                    at,
+                ));
             };
             expect_offset = end;
-            entries.push(IndexEntry { gop, header, offset: off, length });
+            entries.push(IndexEntry {
+                gop,
+                header,
+                offset: off,
+                length,
+            });
         }
         if expect_offset != gops_end {
-            return Err(Error::new(ErrorKind::Index("GOP ranges must end where GIDX starts"), offset));
+            return Err(Error::new(
+                ErrorKind::Index("GOP ranges must end where GIDX starts"),
+                offset,
+            ));
         }
         Ok(GopIndex { entries })
     }
 
     /// The GOP that holds frame `f`.
     pub fn gop_of_frame(&self, f: u32) -> Option<&IndexEntry> {
-        let i = self.entries.partition_point(|e| e.header.first_frame + e.header.frame_count <= f);
+        let i = self
+            .entries
+            .partition_point(|e| e.header.first_frame + e.header.frame_count <= f);
         self.entries.get(i)
     }
 }

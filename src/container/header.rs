@@ -32,7 +32,10 @@ pub fn decode_signature(s: &[u8]) -> Result<(u16, u16)> {
     let major = r.u16("version major")?;
     let minor = r.u16("version minor")?;
     if major != VERSION_MAJOR {
-        return Err(Error::new(ErrorKind::UnsupportedVersion { major, minor }, 8));
+        return Err(Error::new(
+            ErrorKind::UnsupportedVersion { major, minor },
+            8,
+        ));
     }
     Ok((major, minor))
 }
@@ -134,7 +137,9 @@ impl SceneHeader {
     /// Frames in GOP `g` (the last GOP may be shorter).
     pub fn frames_in_gop(&self, g: u32) -> u32 {
         let start = g as u64 * self.gop_length as u64;
-        (self.frame_count as u64).saturating_sub(start).min(self.gop_length as u64) as u32
+        (self.frame_count as u64)
+            .saturating_sub(start)
+            .min(self.gop_length as u64) as u32
     }
 
     pub fn encode(&self) -> Vec<u8> {
@@ -174,13 +179,27 @@ impl SceneHeader {
             }));
         }
         let bad = |field: &'static str, value: u64, reason: &'static str, at: u64| {
-            Error::new(ErrorKind::InvalidField { field, value, reason }, at)
+            Error::new(
+                ErrorKind::InvalidField {
+                    field,
+                    value,
+                    reason,
+                },
+                at,
+            )
         };
         let at = r.offset();
         let variant = match r.u8("variant")? {
             0 => Variant::Gaussians3d,
             1 => Variant::Scaffold,
-            v => return Err(bad("variant", v as u64, "must be 0 (3DGS) or 1 (Scaffold-GS)", at)),
+            v => {
+                return Err(bad(
+                    "variant",
+                    v as u64,
+                    "must be 0 (3DGS) or 1 (Scaffold-GS)",
+                    at,
+                ))
+            }
         };
         let at = r.offset();
         let residual_mode = match r.u8("residual_mode")? {
@@ -208,7 +227,12 @@ impl SceneHeader {
         let at = r.offset();
         let time_channels = r.u8("time_channels")?;
         if time_channels > 64 {
-            return Err(bad("time_channels", time_channels as u64, "must be 0..=64", at));
+            return Err(bad(
+                "time_channels",
+                time_channels as u64,
+                "must be 0..=64",
+                at,
+            ));
         }
         let at = r.offset();
         let deform_model = match r.u8("deform_model")? {
@@ -236,34 +260,62 @@ impl SceneHeader {
             return Err(bad("fps_den", 0, "must be > 0", a_den));
         }
         if gop_length == 0 || gop_length > 65536 {
-            return Err(bad("gop_length", gop_length as u64, "must be 1..=65536", a_gl));
+            return Err(bad(
+                "gop_length",
+                gop_length as u64,
+                "must be 1..=65536",
+                a_gl,
+            ));
         }
         if key_interval == 0 || key_interval > gop_length || gop_length % key_interval != 0 {
-            return Err(bad("key_interval", key_interval as u64, "must divide gop_length", a_ki));
+            return Err(bad(
+                "key_interval",
+                key_interval as u64,
+                "must divide gop_length",
+                a_ki,
+            ));
         }
         if gop_count == 0 {
             return Err(bad("gop_count", 0, "must be > 0", a_gc));
         }
         if gop_count > limits.max_gops {
             return Err(Error::new(
-                ErrorKind::LimitExceeded { what: "gop_count", value: gop_count as u64, limit: limits.max_gops as u64 },
+                ErrorKind::LimitExceeded {
+                    what: "gop_count",
+                    value: gop_count as u64,
+                    limit: limits.max_gops as u64,
+                },
                 a_gc,
             ));
         }
         let lo = (gop_count as u64 - 1) * gop_length as u64;
         let hi = gop_count as u64 * gop_length as u64;
         if (frame_count as u64) <= lo || (frame_count as u64) > hi {
-            return Err(bad("frame_count", frame_count as u64, "must lie in ((gop_count-1)*gop_length, gop_count*gop_length]", a_fc));
+            return Err(bad(
+                "frame_count",
+                frame_count as u64,
+                "must lie in ((gop_count-1)*gop_length, gop_count*gop_length]",
+                a_fc,
+            ));
         }
         let total = n_static as u64 + n_dynamic as u64;
         if total > limits.max_gaussians {
             return Err(Error::new(
-                ErrorKind::LimitExceeded { what: "n_static + n_dynamic", value: total, limit: limits.max_gaussians },
+                ErrorKind::LimitExceeded {
+                    what: "n_static + n_dynamic",
+                    value: total,
+                    limit: limits.max_gaussians,
+                },
                 a_ns,
             ));
         }
         if (n_dynamic > 0) != (time_channels > 0) {
-            return Err(bad("n_dynamic", n_dynamic as u64, "dynamic primitives need time_channels > 0 and vice versa", a_nd));
+            return Err(bad(
+                "n_dynamic",
+                n_dynamic as u64,
+                "dynamic primitives need time_channels > 0 and vice versa",
+                a_nd,
+            ));
         }
         Ok(SceneHeader {
             variant,

@@ -4,7 +4,10 @@
 use std::io::{Read, Seek, SeekFrom};
 
 use crate::bytes::ByteReader;
-use crate::container::chunk::{check_payload_crc, decode_header, ChunkInfo, ChunkType, CHUNK_HEADER_LEN, CHUNK_OVERHEAD, SCENE_LEVEL};
+use crate::container::chunk::{
+    check_payload_crc, decode_header, ChunkInfo, ChunkType, CHUNK_HEADER_LEN, CHUNK_OVERHEAD,
+    SCENE_LEVEL,
+};
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry, TAIL_LEN};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
 use crate::container::is_known_chunk;
@@ -28,12 +31,26 @@ impl<R: Read + Seek> FileReader<R> {
     }
 
     pub fn open_with_limits(mut inner: R, limits: Limits) -> Result<Self> {
-        let file_len = inner.seek(SeekFrom::End(0)).map_err(|e| io_err(e, 0, "seek"))?;
-        let sig = read_at(&mut inner, 0, SIGNATURE_LEN.min(file_len) as usize, "signature")?;
+        let file_len = inner
+            .seek(SeekFrom::End(0))
+            .map_err(|e| io_err(e, 0, "seek"))?;
+        let sig = read_at(
+            &mut inner,
+            0,
+            SIGNATURE_LEN.min(file_len) as usize,
+            "signature",
+        )?;
         if sig.len() < SIGNATURE_LEN as usize {
             // A short file is only "truncated" if what is there is a magic prefix.
             decode_signature(&sig)?;
-            return Err(Error::new(ErrorKind::Truncated { what: "signature", needed: SIGNATURE_LEN, available: file_len }, 0));
+            return Err(Error::new(
+                ErrorKind::Truncated {
+                    what: "signature",
+                    needed: SIGNATURE_LEN,
+                    available: file_len,
+                },
+                0,
+            ));
         }
         let version = decode_signature(&sig)?;
         let mut this = FileReader {
@@ -44,12 +61,21 @@ impl<R: Read + Seek> FileReader<R> {
             version,
             scene_chunks: Vec::new(),
             index: GopIndex::default(),
-            gidx: ChunkInfo { ty: ChunkType::GIDX, flags: 0, gop: 0, len: 0, offset: 0 },
+            gidx: ChunkInfo {
+                ty: ChunkType::GIDX,
+                flags: 0,
+                gop: 0,
+                len: 0,
+                offset: 0,
+            },
         };
         // HEAD
         let head = this.header_at(SIGNATURE_LEN, file_len)?;
         if head.ty != ChunkType::HEAD || head.gop != SCENE_LEVEL {
-            return Err(Error::new(ErrorKind::Order("the first chunk must be a scene-level HEAD"), head.offset));
+            return Err(Error::new(
+                ErrorKind::Order("the first chunk must be a scene-level HEAD"),
+                head.offset,
+            ));
         }
         let p = this.payload(&head)?;
         this.scene = SceneHeader::decode(&p, head.payload_offset(), &this.limits)?;
@@ -57,23 +83,42 @@ impl<R: Read + Seek> FileReader<R> {
         // TAIL -> GIDX
         let tail_size = CHUNK_OVERHEAD + TAIL_LEN as u64;
         if file_len < head.end() + tail_size {
-            return Err(Error::new(ErrorKind::Truncated { what: "TAIL chunk", needed: head.end() + tail_size, available: file_len }, file_len));
+            return Err(Error::new(
+                ErrorKind::Truncated {
+                    what: "TAIL chunk",
+                    needed: head.end() + tail_size,
+                    available: file_len,
+                },
+                file_len,
+            ));
         }
         let tail = this.header_at(file_len - tail_size, file_len)?;
         if tail.ty != ChunkType::TAIL || tail.len != TAIL_LEN as u64 || tail.gop != SCENE_LEVEL {
-            return Err(Error::new(ErrorKind::MissingChunk(ChunkType::TAIL), tail.offset));
+            return Err(Error::new(
+                ErrorKind::MissingChunk(ChunkType::TAIL),
+                tail.offset,
+            ));
         }
         let tp = this.payload(&tail)?;
         let gidx_offset = ByteReader::new(&tp, tail.payload_offset()).u64("TAIL gidx offset")?;
         if gidx_offset < head.end() || gidx_offset >= tail.offset {
-            return Err(Error::new(ErrorKind::Index("TAIL points outside the file body"), tail.payload_offset()));
+            return Err(Error::new(
+                ErrorKind::Index("TAIL points outside the file body"),
+                tail.payload_offset(),
+            ));
         }
         let gidx = this.header_at(gidx_offset, tail.offset)?;
         if gidx.ty != ChunkType::GIDX || gidx.gop != SCENE_LEVEL {
-            return Err(Error::new(ErrorKind::MissingChunk(ChunkType::GIDX), gidx.offset));
+            return Err(Error::new(
+                ErrorKind::MissingChunk(ChunkType::GIDX),
+                gidx.offset,
+            ));
         }
         if gidx.end() != tail.offset {
-            return Err(Error::new(ErrorKind::Order("GIDX must be followed directly by TAIL"), gidx.end()));
+            return Err(Error::new(
+                ErrorKind::Order("GIDX must be followed directly by TAIL"),
+                gidx.end(),
+            ));
         }
 
         // Scene-level chunks up to the first GOPH.
@@ -83,15 +128,24 @@ impl<R: Read + Seek> FileReader<R> {
             if c.ty == ChunkType::GOPH {
                 break;
             }
-            if c.gop != SCENE_LEVEL || matches!(c.ty, ChunkType::HEAD | ChunkType::GIDX | ChunkType::TAIL) {
-                return Err(Error::new(ErrorKind::Order("only scene-level chunks may precede the first GOPH"), c.offset));
+            if c.gop != SCENE_LEVEL
+                || matches!(c.ty, ChunkType::HEAD | ChunkType::GIDX | ChunkType::TAIL)
+            {
+                return Err(Error::new(
+                    ErrorKind::Order("only scene-level chunks may precede the first GOPH"),
+                    c.offset,
+                ));
             }
             if c.must_understand() && !is_known_chunk(c.ty) {
                 return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
             }
             if this.scene_chunks.len() as u32 >= this.limits.max_scene_chunks {
                 return Err(Error::new(
-                    ErrorKind::LimitExceeded { what: "scene-level chunks", value: this.scene_chunks.len() as u64 + 1, limit: this.limits.max_scene_chunks as u64 },
+                    ErrorKind::LimitExceeded {
+                        what: "scene-level chunks",
+                        value: this.scene_chunks.len() as u64 + 1,
+                        limit: this.limits.max_scene_chunks as u64,
+                    },
                     c.offset,
                 ));
             }
@@ -134,25 +188,53 @@ impl<R: Read + Seek> FileReader<R> {
     fn header_at(&mut self, offset: u64, region_end: u64) -> Result<ChunkInfo> {
         if offset + CHUNK_HEADER_LEN > region_end {
             return Err(Error::new(
-                ErrorKind::Truncated { what: "chunk header", needed: CHUNK_HEADER_LEN, available: region_end.saturating_sub(offset) },
+                ErrorKind::Truncated {
+                    what: "chunk header",
+                    needed: CHUNK_HEADER_LEN,
+                    available: region_end.saturating_sub(offset),
+                },
                 offset,
             ));
         }
-        let h = read_at(&mut self.inner, offset, CHUNK_HEADER_LEN as usize, "chunk header")?;
+        let h = read_at(
+            &mut self.inner,
+            offset,
+            CHUNK_HEADER_LEN as usize,
+            "chunk header",
+        )?;
         let info = decode_header(h.as_slice().try_into().expect("24 bytes"), offset)?;
         if info.len > self.limits.max_chunk_len {
-            return Err(Error::new(ErrorKind::LimitExceeded { what: "chunk length", value: info.len, limit: self.limits.max_chunk_len }, offset + 12));
+            return Err(Error::new(
+                ErrorKind::LimitExceeded {
+                    what: "chunk length",
+                    value: info.len,
+                    limit: self.limits.max_chunk_len,
+                },
+                offset + 12,
+            ));
         }
         let avail = region_end - offset - CHUNK_HEADER_LEN;
         if info.len.checked_add(4).is_none_or(|n| n > avail) {
-            return Err(Error::new(ErrorKind::Truncated { what: "chunk payload", needed: info.len + 4, available: avail }, offset + 12));
+            return Err(Error::new(
+                ErrorKind::Truncated {
+                    what: "chunk payload",
+                    needed: info.len + 4,
+                    available: avail,
+                },
+                offset + 12,
+            ));
         }
         Ok(info)
     }
 
     /// Read and CRC-check a chunk's payload.
     pub fn payload(&mut self, info: &ChunkInfo) -> Result<Vec<u8>> {
-        let mut buf = read_at(&mut self.inner, info.payload_offset(), info.len as usize + 4, "chunk payload")?;
+        let mut buf = read_at(
+            &mut self.inner,
+            info.payload_offset(),
+            info.len as usize + 4,
+            "chunk payload",
+        )?;
         let stored = u32::from_le_bytes(buf[info.len as usize..].try_into().expect("4 bytes"));
         buf.truncate(info.len as usize);
         check_payload_crc(info, &buf, stored)?;
@@ -161,11 +243,15 @@ impl<R: Read + Seek> FileReader<R> {
 
     /// The index entry of GOP `g`.
     pub fn gop_entry(&self, g: u32) -> Result<IndexEntry> {
-        self.index
-            .entries
-            .get(g as usize)
-            .copied()
-            .ok_or_else(|| Error::new(ErrorKind::Request(format!("GOP {g} requested, file has {}", self.scene.gop_count)), 0))
+        self.index.entries.get(g as usize).copied().ok_or_else(|| {
+            Error::new(
+                ErrorKind::Request(format!(
+                    "GOP {g} requested, file has {}",
+                    self.scene.gop_count
+                )),
+                0,
+            )
+        })
     }
 
     /// The known payload chunks of GOP `g` (its `GOPH` is checked and not returned).
@@ -175,7 +261,10 @@ impl<R: Read + Seek> FileReader<R> {
         let end = e.offset + e.length;
         let goph = self.header_at(e.offset, end)?;
         if goph.ty != ChunkType::GOPH || goph.gop != g {
-            return Err(Error::new(ErrorKind::Index("GIDX entry does not point at this GOP's GOPH"), e.offset));
+            return Err(Error::new(
+                ErrorKind::Index("GIDX entry does not point at this GOP's GOPH"),
+                e.offset,
+            ));
         }
         let gh = GopHeader::decode(&self.payload(&goph)?, goph.payload_offset())?;
         gh.validate(&self.scene, g, goph.payload_offset())?;
@@ -184,15 +273,30 @@ impl<R: Read + Seek> FileReader<R> {
         let mut count = 0u32;
         while at < end {
             let c = self.header_at(at, end)?;
-            if c.gop != g || matches!(c.ty, ChunkType::HEAD | ChunkType::GOPH | ChunkType::GIDX | ChunkType::TAIL) {
-                return Err(Error::new(ErrorKind::Order("a GOP may hold only payload chunks of its own GOP number"), c.offset));
+            if c.gop != g
+                || matches!(
+                    c.ty,
+                    ChunkType::HEAD | ChunkType::GOPH | ChunkType::GIDX | ChunkType::TAIL
+                )
+            {
+                return Err(Error::new(
+                    ErrorKind::Order("a GOP may hold only payload chunks of its own GOP number"),
+                    c.offset,
+                ));
             }
             if c.must_understand() && !is_known_chunk(c.ty) {
                 return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
             }
             count += 1;
             if count > self.limits.max_chunks_per_gop {
-                return Err(Error::new(ErrorKind::LimitExceeded { what: "chunks per GOP", value: count as u64, limit: self.limits.max_chunks_per_gop as u64 }, c.offset));
+                return Err(Error::new(
+                    ErrorKind::LimitExceeded {
+                        what: "chunks per GOP",
+                        value: count as u64,
+                        limit: self.limits.max_chunks_per_gop as u64,
+                    },
+                    c.offset,
+                ));
             }
             if is_known_chunk(c.ty) {
                 out.push(c);
@@ -220,12 +324,29 @@ impl<R: Read + Seek> FileReader<R> {
 }
 
 /// Read exactly `n` bytes at `offset`. Callers have checked `offset + n <= file_len`.
-fn read_at<R: Read + Seek>(r: &mut R, offset: u64, n: usize, what: &'static str) -> Result<Vec<u8>> {
-    r.seek(SeekFrom::Start(offset)).map_err(|e| io_err(e, offset, what))?;
+fn read_at<R: Read + Seek>(
+    r: &mut R,
+    offset: u64,
+    n: usize,
+    what: &'static str,
+) -> Result<Vec<u8>> {
+    r.seek(SeekFrom::Start(offset))
+        .map_err(|e| io_err(e, offset, what))?;
     let mut buf = Vec::new();
-    let got = r.by_ref().take(n as u64).read_to_end(&mut buf).map_err(|e| io_err(e, offset, what))?;
+    let got = r
+        .by_ref()
+        .take(n as u64)
+        .read_to_end(&mut buf)
+        .map_err(|e| io_err(e, offset, what))?;
     if got < n {
-        return Err(Error::new(ErrorKind::Truncated { what, needed: n as u64, available: got as u64 }, offset));
+        return Err(Error::new(
+            ErrorKind::Truncated {
+                what,
+                needed: n as u64,
+                available: got as u64,
+            },
+            offset,
+        ));
     }
     Ok(buf)
 }

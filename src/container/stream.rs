@@ -5,7 +5,9 @@
 use std::io::Read;
 
 use crate::bytes::ByteReader;
-use crate::container::chunk::{check_payload_crc, decode_header, ChunkInfo, ChunkType, CHUNK_HEADER_LEN, SCENE_LEVEL};
+use crate::container::chunk::{
+    check_payload_crc, decode_header, ChunkInfo, ChunkType, CHUNK_HEADER_LEN, SCENE_LEVEL,
+};
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
 use crate::container::is_known_chunk;
@@ -66,7 +68,10 @@ impl<R: Read> StreamReader<R> {
         decode_signature(&sig)?;
         let (head, p) = s.read_chunk()?;
         if head.ty != ChunkType::HEAD || head.gop != SCENE_LEVEL {
-            return Err(Error::new(ErrorKind::Order("the first chunk must be a scene-level HEAD"), head.offset));
+            return Err(Error::new(
+                ErrorKind::Order("the first chunk must be a scene-level HEAD"),
+                head.offset,
+            ));
         }
         s.scene = SceneHeader::decode(&p, head.payload_offset(), &s.limits)?;
         Ok(s)
@@ -83,9 +88,21 @@ impl<R: Read> StreamReader<R> {
     fn read_exact_vec(&mut self, n: usize, what: &'static str) -> Result<Vec<u8>> {
         let mut buf = Vec::new();
         // `take` + `read_to_end` grows the buffer only as bytes really arrive.
-        let got = self.inner.by_ref().take(n as u64).read_to_end(&mut buf).map_err(|e| io_err(e, self.pos, what))?;
+        let got = self
+            .inner
+            .by_ref()
+            .take(n as u64)
+            .read_to_end(&mut buf)
+            .map_err(|e| io_err(e, self.pos, what))?;
         if got < n {
-            return Err(Error::new(ErrorKind::Truncated { what, needed: n as u64, available: got as u64 }, self.pos));
+            return Err(Error::new(
+                ErrorKind::Truncated {
+                    what,
+                    needed: n as u64,
+                    available: got as u64,
+                },
+                self.pos,
+            ));
         }
         self.pos += n as u64;
         Ok(buf)
@@ -96,7 +113,14 @@ impl<R: Read> StreamReader<R> {
         let h = self.read_exact_vec(CHUNK_HEADER_LEN as usize, "chunk header")?;
         let info = decode_header(h.as_slice().try_into().expect("24 bytes"), at)?;
         if info.len > self.limits.max_chunk_len {
-            return Err(Error::new(ErrorKind::LimitExceeded { what: "chunk length", value: info.len, limit: self.limits.max_chunk_len }, at + 12));
+            return Err(Error::new(
+                ErrorKind::LimitExceeded {
+                    what: "chunk length",
+                    value: info.len,
+                    limit: self.limits.max_chunk_len,
+                },
+                at + 12,
+            ));
         }
         Ok(info)
     }
@@ -130,14 +154,23 @@ impl<R: Read> StreamReader<R> {
                 State::AfterIndex => {
                     let (c, p) = self.read_chunk()?;
                     if c.ty != ChunkType::TAIL || c.gop != SCENE_LEVEL {
-                        return Err(Error::new(ErrorKind::Order("GIDX must be followed by TAIL"), c.offset));
+                        return Err(Error::new(
+                            ErrorKind::Order("GIDX must be followed by TAIL"),
+                            c.offset,
+                        ));
                     }
                     let off = ByteReader::new(&p, c.payload_offset()).u64("TAIL gidx offset")?;
                     if off != self.gidx_offset {
-                        return Err(Error::new(ErrorKind::Index("TAIL does not point at GIDX"), c.payload_offset()));
+                        return Err(Error::new(
+                            ErrorKind::Index("TAIL does not point at GIDX"),
+                            c.payload_offset(),
+                        ));
                     }
                     let mut extra = [0u8; 1];
-                    let n = self.inner.read(&mut extra).map_err(|e| io_err(e, self.pos, "end of file"))?;
+                    let n = self
+                        .inner
+                        .read(&mut extra)
+                        .map_err(|e| io_err(e, self.pos, "end of file"))?;
                     if n != 0 {
                         return Err(Error::new(ErrorKind::Order("bytes after TAIL"), self.pos));
                     }
@@ -155,40 +188,66 @@ impl<R: Read> StreamReader<R> {
             match c.ty {
                 ChunkType::GOPH => {
                     if c.gop != next_gop || next_gop >= self.scene.gop_count {
-                        return Err(Error::new(ErrorKind::Order("GOPH out of sequence"), c.offset));
+                        return Err(Error::new(
+                            ErrorKind::Order("GOPH out of sequence"),
+                            c.offset,
+                        ));
                     }
                     let p = self.read_payload(&c)?;
                     let gh = GopHeader::decode(&p, c.payload_offset())?;
                     gh.validate(&self.scene, c.gop, c.payload_offset())?;
                     self.close_gop(c.offset);
-                    self.seen.push(IndexEntry { gop: c.gop, header: gh, offset: c.offset, length: 0 });
+                    self.seen.push(IndexEntry {
+                        gop: c.gop,
+                        header: gh,
+                        offset: c.offset,
+                        length: 0,
+                    });
                     self.state = State::InGop(c.gop);
                     self.gop_chunks = 0;
                     return Ok(Some(StreamEvent::GopStart(c.gop, gh)));
                 }
                 ChunkType::GIDX => {
                     if c.gop != SCENE_LEVEL || next_gop != self.scene.gop_count {
-                        return Err(Error::new(ErrorKind::Order("GIDX before the last GOP"), c.offset));
+                        return Err(Error::new(
+                            ErrorKind::Order("GIDX before the last GOP"),
+                            c.offset,
+                        ));
                     }
                     let p = self.read_payload(&c)?;
                     self.close_gop(c.offset);
                     let gops_start = self.seen.first().map_or(c.offset, |e| e.offset);
-                    let idx = GopIndex::decode(&p, c.payload_offset(), &self.scene, gops_start, c.offset)?;
+                    let idx = GopIndex::decode(
+                        &p,
+                        c.payload_offset(),
+                        &self.scene,
+                        gops_start,
+                        c.offset,
+                    )?;
                     if idx.entries != self.seen {
-                        return Err(Error::new(ErrorKind::Index("GIDX disagrees with the GOPs in the stream"), c.payload_offset()));
+                        return Err(Error::new(
+                            ErrorKind::Index("GIDX disagrees with the GOPs in the stream"),
+                            c.payload_offset(),
+                        ));
                     }
                     self.gidx_offset = c.offset;
                     self.state = State::AfterIndex;
                     return Ok(Some(StreamEvent::End(idx)));
                 }
                 ChunkType::HEAD | ChunkType::TAIL => {
-                    return Err(Error::new(ErrorKind::Order("HEAD/TAIL in the body"), c.offset));
+                    return Err(Error::new(
+                        ErrorKind::Order("HEAD/TAIL in the body"),
+                        c.offset,
+                    ));
                 }
                 _ => {}
             }
             let expected_gop = current.unwrap_or(SCENE_LEVEL);
             if c.gop != expected_gop {
-                return Err(Error::new(ErrorKind::Order("chunk GOP number does not match its position"), c.offset + 8));
+                return Err(Error::new(
+                    ErrorKind::Order("chunk GOP number does not match its position"),
+                    c.offset + 8,
+                ));
             }
             if c.must_understand() && !is_known_chunk(c.ty) {
                 return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
@@ -196,15 +255,30 @@ impl<R: Read> StreamReader<R> {
             let (count, limit, what) = match current {
                 None => {
                     self.scene_chunks += 1;
-                    (self.scene_chunks, self.limits.max_scene_chunks, "scene-level chunks")
+                    (
+                        self.scene_chunks,
+                        self.limits.max_scene_chunks,
+                        "scene-level chunks",
+                    )
                 }
                 Some(_) => {
                     self.gop_chunks += 1;
-                    (self.gop_chunks, self.limits.max_chunks_per_gop, "chunks per GOP")
+                    (
+                        self.gop_chunks,
+                        self.limits.max_chunks_per_gop,
+                        "chunks per GOP",
+                    )
                 }
             };
             if count > limit {
-                return Err(Error::new(ErrorKind::LimitExceeded { what, value: count as u64, limit: limit as u64 }, c.offset));
+                return Err(Error::new(
+                    ErrorKind::LimitExceeded {
+                        what,
+                        value: count as u64,
+                        limit: limit as u64,
+                    },
+                    c.offset,
+                ));
             }
             let p = self.read_payload(&c)?;
             if !is_known_chunk(c.ty) {

@@ -20,7 +20,13 @@ pub struct Writer<W: Write> {
 impl<W: Write> Writer<W> {
     /// Write the signature and `HEAD`.
     pub fn new(out: W, scene: SceneHeader) -> Result<Self> {
-        let mut w = Writer { out, pos: 0, scene, index: GopIndex::default(), open_gop: None };
+        let mut w = Writer {
+            out,
+            pos: 0,
+            scene,
+            index: GopIndex::default(),
+            open_gop: None,
+        };
         w.raw(&encode_signature())?;
         let head = w.scene.encode();
         w.chunk(ChunkType::HEAD, FLAG_MUST_UNDERSTAND, SCENE_LEVEL, &head)?;
@@ -35,7 +41,9 @@ impl<W: Write> Writer<W> {
     }
 
     fn raw(&mut self, b: &[u8]) -> Result<()> {
-        self.out.write_all(b).map_err(|e| io_err(e, self.pos, "write"))?;
+        self.out
+            .write_all(b)
+            .map_err(|e| io_err(e, self.pos, "write"))?;
         self.pos += b.len() as u64;
         Ok(())
     }
@@ -68,7 +76,12 @@ impl<W: Write> Writer<W> {
         let header = GopHeader::expected(&self.scene, g);
         let offset = self.pos;
         self.chunk(ChunkType::GOPH, FLAG_MUST_UNDERSTAND, g, &header.encode())?;
-        self.open_gop = Some(IndexEntry { gop: g, header, offset, length: 0 });
+        self.open_gop = Some(IndexEntry {
+            gop: g,
+            header,
+            offset,
+            length: 0,
+        });
         Ok(g)
     }
 

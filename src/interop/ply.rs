@@ -11,7 +11,13 @@ use crate::model::{sh_coeffs, Gaussians};
 const FORMAT: &str = "PLY";
 
 fn err(reason: impl Into<String>) -> Error {
-    Error::new(ErrorKind::Foreign { format: FORMAT, reason: reason.into() }, 0)
+    Error::new(
+        ErrorKind::Foreign {
+            format: FORMAT,
+            reason: reason.into(),
+        },
+        0,
+    )
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -59,7 +65,11 @@ impl Scalar {
         macro_rules! get {
             ($t:ty, $n:expr) => {{
                 let a: [u8; $n] = b[..$n].try_into().expect("sized");
-                (if enc == Encoding::Be { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) }) as f64
+                (if enc == Encoding::Be {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }) as f64
             }};
         }
         match self {
@@ -91,7 +101,10 @@ fn parse_header(data: &[u8]) -> Result<Header> {
     const MAX_HEADER: usize = 1 << 20;
     let end_marker = b"end_header";
     let search = &data[..data.len().min(MAX_HEADER)];
-    let pos = search.windows(end_marker.len()).position(|w| w == end_marker).ok_or_else(|| err("no end_header within the first 1 MiB"))?;
+    let pos = search
+        .windows(end_marker.len())
+        .position(|w| w == end_marker)
+        .ok_or_else(|| err("no end_header within the first 1 MiB"))?;
     let mut body_start = pos + end_marker.len();
     // end_header is followed by "\n" or "\r\n".
     if data.get(body_start) == Some(&b'\r') {
@@ -121,27 +134,49 @@ fn parse_header(data: &[u8]) -> Result<Header> {
                 })
             }
             ["element", name, count] => {
-                let count: usize = count.parse().map_err(|_| err(format!("bad element count {count}")))?;
-                elements.push(Element { name: name.to_string(), count, props: Vec::new() });
+                let count: usize = count
+                    .parse()
+                    .map_err(|_| err(format!("bad element count {count}")))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
             }
             ["property", "list", ..] => {
-                let e = elements.last().ok_or_else(|| err("property before element"))?;
+                let e = elements
+                    .last()
+                    .ok_or_else(|| err("property before element"))?;
                 if e.name == "vertex" || elements.iter().all(|x| x.name != "vertex") {
-                    return Err(err(format!("list property in element '{}' is not supported", e.name)));
+                    return Err(err(format!(
+                        "list property in element '{}' is not supported",
+                        e.name
+                    )));
                 }
                 // list properties after the vertex element are fine: we stop reading there.
-                elements.last_mut().expect("checked").props.push((String::new(), Scalar::U8));
+                elements
+                    .last_mut()
+                    .expect("checked")
+                    .props
+                    .push((String::new(), Scalar::U8));
             }
             ["property", ty, name] => {
-                let s = Scalar::parse(ty).ok_or_else(|| err(format!("unknown property type {ty}")))?;
-                let e = elements.last_mut().ok_or_else(|| err("property before element"))?;
+                let s =
+                    Scalar::parse(ty).ok_or_else(|| err(format!("unknown property type {ty}")))?;
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err("property before element"))?;
                 e.props.push((name.to_string(), s));
             }
             _ => return Err(err(format!("unrecognised header line '{line}'"))),
         }
     }
     let enc = enc.ok_or_else(|| err("missing format line"))?;
-    Ok(Header { enc, elements, body_start })
+    Ok(Header {
+        enc,
+        elements,
+        body_start,
+    })
 }
 
 /// Column indices of the attributes we use in the vertex element.
@@ -164,10 +199,15 @@ fn columns(props: &[(String, Scalar)]) -> Result<Columns> {
         rest.push(i);
     }
     if ![0, 9, 24, 45].contains(&rest.len()) {
-        return Err(err(format!("{} f_rest properties; expected 0, 9, 24 or 45", rest.len())));
+        return Err(err(format!(
+            "{} f_rest properties; expected 0, 9, 24 or 45",
+            rest.len()
+        )));
     }
     let mut lang = Vec::new();
-    while let Some(i) = find(&format!("lang_{}", lang.len())).or_else(|| find(&format!("language_feature_{}", lang.len()))) {
+    while let Some(i) = find(&format!("lang_{}", lang.len()))
+        .or_else(|| find(&format!("language_feature_{}", lang.len())))
+    {
         lang.push(i);
     }
     let lang_opacity = find("lang_opacity").or_else(|| find("opacity_lang"));
@@ -177,7 +217,12 @@ fn columns(props: &[(String, Scalar)]) -> Result<Columns> {
     Ok(Columns {
         pos: [need("x")?, need("y")?, need("z")?],
         scale: [need("scale_0")?, need("scale_1")?, need("scale_2")?],
-        rot: [need("rot_0")?, need("rot_1")?, need("rot_2")?, need("rot_3")?],
+        rot: [
+            need("rot_0")?,
+            need("rot_1")?,
+            need("rot_2")?,
+            need("rot_3")?,
+        ],
         opacity: need("opacity")?,
         dc: [need("f_dc_0")?, need("f_dc_1")?, need("f_dc_2")?],
         rest,
@@ -187,39 +232,73 @@ fn columns(props: &[(String, Scalar)]) -> Result<Columns> {
 }
 
 /// Parse the rows of an element into f64 values. `count` rows are guaranteed present.
-fn read_rows(data: &[u8], at: &mut usize, enc: Encoding, e: &Element, keep: bool) -> Result<Vec<f64>> {
+fn read_rows(
+    data: &[u8],
+    at: &mut usize,
+    enc: Encoding,
+    e: &Element,
+    keep: bool,
+) -> Result<Vec<f64>> {
     let ncol = e.props.len();
     match enc {
         Encoding::Ascii => {
-            let text = std::str::from_utf8(&data[*at..]).map_err(|_| err("ASCII body is not UTF-8"))?;
+            let text =
+                std::str::from_utf8(&data[*at..]).map_err(|_| err("ASCII body is not UTF-8"))?;
             let mut out = Vec::new();
             let mut consumed = 0;
             for (row, line) in text.split_inclusive('\n').take(e.count).enumerate() {
                 consumed += line.len();
-                let vals: Vec<f64> = line.split_whitespace().map(|t| t.parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| err(format!("bad number in {} row {row}", e.name)))?;
+                let vals: Vec<f64> = line
+                    .split_whitespace()
+                    .map(|t| t.parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| err(format!("bad number in {} row {row}", e.name)))?;
                 if vals.len() != ncol {
-                    return Err(err(format!("{} row {row} has {} values, expected {ncol}", e.name, vals.len())));
+                    return Err(err(format!(
+                        "{} row {row} has {} values, expected {ncol}",
+                        e.name,
+                        vals.len()
+                    )));
                 }
                 if keep {
                     out.extend(vals);
                 }
             }
             if keep && out.len() != e.count * ncol {
-                return Err(err(format!("{} rows of '{}' declared, fewer present", e.count, e.name)));
+                return Err(err(format!(
+                    "{} rows of '{}' declared, fewer present",
+                    e.count, e.name
+                )));
             }
             *at += consumed;
             Ok(out)
         }
         Encoding::Le | Encoding::Be => {
             let stride: usize = e.props.iter().map(|(_, s)| s.size()).sum();
-            let bytes = e.count.checked_mul(stride).ok_or_else(|| err("element size overflows"))?;
+            let bytes = e
+                .count
+                .checked_mul(stride)
+                .ok_or_else(|| err("element size overflows"))?;
             if data.len() - *at < bytes {
-                return Err(err(format!("{} rows of '{}' need {bytes} bytes, {} present", e.count, e.name, data.len() - *at)));
+                return Err(err(format!(
+                    "{} rows of '{}' need {bytes} bytes, {} present",
+                    e.count,
+                    e.name,
+                    data.len() - *at
+                )));
             }
             let mut out = Vec::new();
             if keep {
                 out.reserve(e.count * ncol);
-                let offs: Vec<usize> = e.props.iter().scan(0, |o, (_, s)| { let r = *o; *o += s.size(); Some(r) }).collect();
+                let offs: Vec<usize> = e
+                    .props
+                    .iter()
+                    .scan(0, |o, (_, s)| {
+                        let r = *o;
+                        *o += s.size();
+                        Some(r)
+                    })
+                    .collect();
                 for row in data[*at..*at + bytes].chunks_exact(stride) {
                     for (k, (_, s)) in e.props.iter().enumerate() {
                         out.push(s.read(&row[offs[k]..], enc));
@@ -239,7 +318,10 @@ pub fn read_ply(data: &[u8]) -> Result<Gaussians> {
     for e in &h.elements {
         if e.name != "vertex" {
             if e.props.iter().any(|(n, _)| n.is_empty()) {
-                return Err(err(format!("element '{}' before vertex has list properties", e.name)));
+                return Err(err(format!(
+                    "element '{}' before vertex has list properties",
+                    e.name
+                )));
             }
             read_rows(data, &mut at, h.enc, e, false)?;
             continue;
@@ -247,7 +329,9 @@ pub fn read_ply(data: &[u8]) -> Result<Gaussians> {
         let c = columns(&e.props)?;
         let ncol = e.props.len();
         // Binary: checked in read_rows before allocation. ASCII needs >= 2 bytes per value.
-        if h.enc == Encoding::Ascii && e.count.saturating_mul(ncol).saturating_mul(2) > data.len() - at {
+        if h.enc == Encoding::Ascii
+            && e.count.saturating_mul(ncol).saturating_mul(2) > data.len() - at
+        {
             return Err(err("vertex count larger than the file can hold"));
         }
         let rows = read_rows(data, &mut at, h.enc, e, true)?;
@@ -271,7 +355,11 @@ pub fn read_ply(data: &[u8]) -> Result<Gaussians> {
             for coef in 0..k {
                 for ch in 0..3 {
                     // INRIA f_rest is channel-major: all of R's coefficients, then G's, then B's.
-                    g.sh.push(if coef == 0 { f(c.dc[ch]) } else { f(c.rest[ch * (k - 1) + coef - 1]) });
+                    g.sh.push(if coef == 0 {
+                        f(c.dc[ch])
+                    } else {
+                        f(c.rest[ch * (k - 1) + coef - 1])
+                    });
                 }
             }
             if let Some(lo) = c.lang_opacity {
@@ -290,14 +378,18 @@ pub fn write_ply(g: &Gaussians) -> Result<Vec<u8>> {
     let k = g.coeffs();
     let mut hdr = String::from("ply\nformat binary_little_endian 1.0\n");
     hdr += &format!("element vertex {}\n", g.len());
-    for p in ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] {
+    for p in [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ] {
         hdr += &format!("property float {p}\n");
     }
     for i in 0..(k - 1) * 3 {
         hdr += &format!("property float f_rest_{i}\n");
     }
     hdr += "property float opacity\n";
-    for p in ["scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"] {
+    for p in [
+        "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
         hdr += &format!("property float {p}\n");
     }
     if g.has_language() {
@@ -307,7 +399,14 @@ pub fn write_ply(g: &Gaussians) -> Result<Vec<u8>> {
         }
     }
     hdr += "end_header\n";
-    let floats = 9 + (k - 1) * 3 + 8 + if g.has_language() { 1 + g.lang_width } else { 0 };
+    let floats = 9
+        + (k - 1) * 3
+        + 8
+        + if g.has_language() {
+            1 + g.lang_width
+        } else {
+            0
+        };
     let mut out = Vec::with_capacity(hdr.len() + g.len() * floats * 4);
     out.extend_from_slice(hdr.as_bytes());
     let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());

@@ -8,7 +8,13 @@ pub const SH_C0: f32 = 0.282_094_8;
 const STRIDE: usize = 32;
 
 fn err(reason: impl Into<String>) -> Error {
-    Error::new(ErrorKind::Foreign { format: ".splat", reason: reason.into() }, 0)
+    Error::new(
+        ErrorKind::Foreign {
+            format: ".splat",
+            reason: reason.into(),
+        },
+        0,
+    )
 }
 
 /// Inverse sigmoid of an 8-bit alpha. 0 and 255 would give +-inf, so alpha is taken as
@@ -19,24 +25,27 @@ pub fn alpha_u8_to_logit(a: u8) -> f32 {
 }
 
 pub fn read_splat(data: &[u8]) -> Result<Gaussians> {
-    if data.len() % STRIDE != 0 {
+    if !data.len().is_multiple_of(STRIDE) {
         return Err(err(format!("{} bytes is not a multiple of 32", data.len())));
     }
     let n = data.len() / STRIDE;
     let mut g = Gaussians::new(0, 0);
     g.positions.reserve(n);
-    let f = |b: &[u8], i: usize| f32::from_le_bytes(b[i * 4..i * 4 + 4].try_into().expect("4 bytes"));
+    let f =
+        |b: &[u8], i: usize| f32::from_le_bytes(b[i * 4..i * 4 + 4].try_into().expect("4 bytes"));
     for r in data.chunks_exact(STRIDE) {
         g.positions.push([f(r, 0), f(r, 1), f(r, 2)]);
         // A zero linear scale maps to -inf log-scale; floor at 1e-12 so it stays finite.
-        g.log_scales.push([3, 4, 5].map(|i| f(r, i).abs().max(1e-12).ln()));
+        g.log_scales
+            .push([3, 4, 5].map(|i| f(r, i).abs().max(1e-12).ln()));
         let c = &r[24..28];
         for ch in 0..3 {
             g.sh.push((c[ch] as f32 / 255.0 - 0.5) / SH_C0);
         }
         g.opacity.push(alpha_u8_to_logit(c[3]));
         let q = &r[28..32];
-        g.rotations.push([0, 1, 2, 3].map(|i| (q[i] as f32 - 128.0) / 128.0));
+        g.rotations
+            .push([0, 1, 2, 3].map(|i| (q[i] as f32 - 128.0) / 128.0));
     }
     Ok(g)
 }

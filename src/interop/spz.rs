@@ -16,15 +16,25 @@ const MAGIC: u32 = 0x5053_474e;
 const COLOR_SCALE: f32 = 0.15;
 
 fn err(reason: impl Into<String>) -> Error {
-    Error::new(ErrorKind::Foreign { format: "SPZ", reason: reason.into() }, 0)
+    Error::new(
+        ErrorKind::Foreign {
+            format: "SPZ",
+            reason: reason.into(),
+        },
+        0,
+    )
 }
 
 /// Sign flips per SH coefficient (index 1..16) for the RUB -> RDF change (180 deg about x).
-const SH_FLIP: [f32; 16] = [1., -1., -1., 1., -1., 1., 1., -1., 1., -1., 1., -1., -1., 1., -1., 1.];
+const SH_FLIP: [f32; 16] = [
+    1., -1., -1., 1., -1., 1., 1., -1., 1., -1., 1., -1., -1., 1., -1., 1.,
+];
 
 pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     if data.len() < 2 || data[0..2] != [0x1f, 0x8b] {
-        return Err(err("not a gzip SPZ (v2/v3); SPZ v4 (NGSP + zstd) is not supported yet"));
+        return Err(err(
+            "not a gzip SPZ (v2/v3); SPZ v4 (NGSP + zstd) is not supported yet",
+        ));
     }
     let mut raw = Vec::new();
     flate2::read::GzDecoder::new(data)
@@ -40,7 +50,9 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     }
     let version = u32at(4);
     if !(2..=3).contains(&version) {
-        return Err(err(format!("version {version} not supported (2 and 3 are)")));
+        return Err(err(format!(
+            "version {version} not supported (2 and 3 are)"
+        )));
     }
     let n = u32at(8) as usize;
     let degree = raw[12];
@@ -56,7 +68,11 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     let per = 9 + 1 + 3 + 3 + rot_bytes + rest * 3;
     let need = 16 + n.checked_mul(per).ok_or_else(|| err("size overflow"))?;
     if raw.len() != need {
-        return Err(err(format!("{} points need {need} bytes, {} present", n, raw.len())));
+        return Err(err(format!(
+            "{} points need {need} bytes, {} present",
+            n,
+            raw.len()
+        )));
     }
     let pos = &raw[16..16 + 9 * n];
     let alpha = &raw[16 + 9 * n..16 + 10 * n];
@@ -74,7 +90,8 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
             v as f32 * scale * flip[a]
         };
         g.positions.push([p(0), p(1), p(2)]);
-        g.log_scales.push([0, 1, 2].map(|a| scl[i * 3 + a] as f32 / 16.0 - 10.0));
+        g.log_scales
+            .push([0, 1, 2].map(|a| scl[i * 3 + a] as f32 / 16.0 - 10.0));
         g.opacity.push(alpha_u8_to_logit(alpha[i]));
         let mut xyzw = [0f32; 4];
         if version >= 3 {
@@ -96,9 +113,16 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
             for k in 0..3 {
                 xyzw[k] = r[k] as f32 / 127.5 - 1.0;
             }
-            xyzw[3] = (1.0 - xyzw[..3].iter().map(|v| v * v).sum::<f32>()).max(0.0).sqrt();
+            xyzw[3] = (1.0 - xyzw[..3].iter().map(|v| v * v).sum::<f32>())
+                .max(0.0)
+                .sqrt();
         }
-        g.rotations.push([xyzw[3], xyzw[0] * flip[0], xyzw[1] * flip[1], xyzw[2] * flip[2]]);
+        g.rotations.push([
+            xyzw[3],
+            xyzw[0] * flip[0],
+            xyzw[1] * flip[1],
+            xyzw[2] * flip[2],
+        ]);
         for c in 0..3 {
             g.sh.push((col[i * 3 + c] as f32 / 255.0 - 0.5) / COLOR_SCALE);
         }

@@ -32,7 +32,11 @@ pub struct Gaussians {
 
 impl Gaussians {
     pub fn new(sh_degree: u8, lang_width: usize) -> Self {
-        Gaussians { sh_degree, lang_width, ..Default::default() }
+        Gaussians {
+            sh_degree,
+            lang_width,
+            ..Default::default()
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -75,14 +79,22 @@ impl Gaussians {
         if ok {
             Ok(())
         } else {
-            Err(Error::new(ErrorKind::InvalidInput("Gaussian attribute arrays have inconsistent lengths".into()), 0))
+            Err(Error::new(
+                ErrorKind::InvalidInput(
+                    "Gaussian attribute arrays have inconsistent lengths".into(),
+                ),
+                0,
+            ))
         }
     }
 
     /// Reject NaN/Inf anywhere (the encoder's gate): names the attribute and the Gaussian.
     pub fn check_finite(&self) -> Result<()> {
         let bad = |what: &str, i: usize| {
-            Err(Error::new(ErrorKind::InvalidInput(format!("{what} of Gaussian {i} is NaN or infinite")), 0))
+            Err(Error::new(
+                ErrorKind::InvalidInput(format!("{what} of Gaussian {i} is NaN or infinite")),
+                0,
+            ))
         };
         for i in 0..self.len() {
             if !self.positions[i].iter().all(|v| v.is_finite()) {
@@ -100,7 +112,10 @@ impl Gaussians {
             if !self.sh_of(i).iter().all(|v| v.is_finite()) {
                 return bad("SH colour", i);
             }
-            if self.has_language() && (!self.lang_opacity[i].is_finite() || !self.lang_of(i).iter().all(|v| v.is_finite())) {
+            if self.has_language()
+                && (!self.lang_opacity[i].is_finite()
+                    || !self.lang_of(i).iter().all(|v| v.is_finite()))
+            {
                 return bad("language feature or opacity", i);
             }
         }
@@ -170,7 +185,10 @@ pub struct Canonical {
 impl Canonical {
     pub fn from_static(g: Gaussians) -> Self {
         let dynamics = Gaussians::new(g.sh_degree, g.lang_width);
-        Canonical { statics: g, dynamics }
+        Canonical {
+            statics: g,
+            dynamics,
+        }
     }
     pub fn len(&self) -> usize {
         self.statics.len() + self.dynamics.len()

@@ -52,8 +52,14 @@ pub fn canonical_digest(c: &Canonical) -> String {
 pub fn encode(c: &Canonical, codec: RawCodec, zstd_level: i32) -> Result<Vec<u8>> {
     c.statics.check_shapes()?;
     c.dynamics.check_shapes()?;
-    if c.statics.sh_degree != c.dynamics.sh_degree || c.statics.lang_width != c.dynamics.lang_width {
-        return Err(Error::new(ErrorKind::InvalidInput("static and dynamic sets must share SH degree and language width".into()), 0));
+    if c.statics.sh_degree != c.dynamics.sh_degree || c.statics.lang_width != c.dynamics.lang_width
+    {
+        return Err(Error::new(
+            ErrorKind::InvalidInput(
+                "static and dynamic sets must share SH degree and language width".into(),
+            ),
+            0,
+        ));
     }
     c.statics.check_finite()?;
     c.dynamics.check_finite()?;
@@ -69,7 +75,8 @@ pub fn encode(c: &Canonical, codec: RawCodec, zstd_level: i32) -> Result<Vec<u8>
     match codec {
         RawCodec::None => p.extend_from_slice(&body),
         RawCodec::Zstd => {
-            let z = zstd::bulk::compress(&body, zstd_level).map_err(|e| Error::new(ErrorKind::Io(e.to_string()), 0))?;
+            let z = zstd::bulk::compress(&body, zstd_level)
+                .map_err(|e| Error::new(ErrorKind::Io(e.to_string()), 0))?;
             p.extend_from_slice(&z);
         }
     }
@@ -78,10 +85,18 @@ pub fn encode(c: &Canonical, codec: RawCodec, zstd_level: i32) -> Result<Vec<u8>
 
 fn read_set(r: &mut ByteReader, n: usize, sh_degree: u8, lw: usize) -> Result<Gaussians> {
     let mut g = Gaussians::new(sh_degree, lw);
-    let to3 = |v: Vec<f32>| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
+    let to3 = |v: Vec<f32>| {
+        v.chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect::<Vec<_>>()
+    };
     g.positions = to3(r.f32_vec(n * 3, "positions")?);
     g.log_scales = to3(r.f32_vec(n * 3, "log-scales")?);
-    g.rotations = r.f32_vec(n * 4, "rotations")?.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    g.rotations = r
+        .f32_vec(n * 4, "rotations")?
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
     g.opacity = r.f32_vec(n, "opacity")?;
     g.sh = r.f32_vec(n * g.sh_stride(), "SH")?;
     if lw > 0 {
@@ -94,12 +109,23 @@ fn read_set(r: &mut ByteReader, n: usize, sh_degree: u8, lw: usize) -> Result<Ga
 /// Decode a `CRAW` payload that starts at absolute `offset`, checking it against the scene.
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<Canonical> {
     let mut r = ByteReader::new(p, offset);
-    let bad = |reason: String, at: u64| Error::new(ErrorKind::Payload { chunk: ChunkType::CRAW, reason }, at);
+    let bad = |reason: String, at: u64| {
+        Error::new(
+            ErrorKind::Payload {
+                chunk: ChunkType::CRAW,
+                reason,
+            },
+            at,
+        )
+    };
     let at = r.offset();
     let sh_degree = r.u8("CRAW sh_degree")?;
     let lw = r.u8("CRAW lang_width")? as usize;
     if sh_degree != scene.sh_degree || lw != scene.lang_width() {
-        return Err(bad(format!("layout (SH {sh_degree}, language {lw}) differs from HEAD"), at));
+        return Err(bad(
+            format!("layout (SH {sh_degree}, language {lw}) differs from HEAD"),
+            at,
+        ));
     }
     let at = r.offset();
     let codec = match r.u8("CRAW codec")? {
@@ -112,17 +138,33 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let ns = r.u32("CRAW n_static")? as usize;
     let nd = r.u32("CRAW n_dynamic")? as usize;
     if ns != scene.n_static as usize || nd != scene.n_dynamic as usize {
-        return Err(bad(format!("counts {ns}/{nd} differ from HEAD {}/{}", scene.n_static, scene.n_dynamic), at));
+        return Err(bad(
+            format!(
+                "counts {ns}/{nd} differ from HEAD {}/{}",
+                scene.n_static, scene.n_dynamic
+            ),
+            at,
+        ));
     }
     let at = r.offset();
     let body_len = r.u64("CRAW body length")?;
     // Counts are bounded by HEAD (already checked against limits), so this cannot overflow u64.
     let want = (ns + nd) as u64 * floats_per_gaussian(sh_degree, lw) as u64 * 4;
     if body_len != want {
-        return Err(bad(format!("body length {body_len}, layout needs {want}"), at));
+        return Err(bad(
+            format!("body length {body_len}, layout needs {want}"),
+            at,
+        ));
     }
     if body_len > limits.max_alloc {
-        return Err(Error::new(ErrorKind::LimitExceeded { what: "CRAW body", value: body_len, limit: limits.max_alloc }, at));
+        return Err(Error::new(
+            ErrorKind::LimitExceeded {
+                what: "CRAW body",
+                value: body_len,
+                limit: limits.max_alloc,
+            },
+            at,
+        ));
     }
     let body_at = r.offset();
     let rest = r.rest();
@@ -130,7 +172,10 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let body: &[u8] = match codec {
         RawCodec::None => {
             if rest.len() as u64 != body_len {
-                return Err(bad(format!("{} body bytes present, {body_len} declared", rest.len()), body_at));
+                return Err(bad(
+                    format!("{} body bytes present, {body_len} declared", rest.len()),
+                    body_at,
+                ));
             }
             rest
         }
@@ -138,7 +183,13 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             owned = zstd::bulk::decompress(rest, body_len as usize)
                 .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), body_at))?;
             if owned.len() as u64 != body_len {
-                return Err(Error::new(ErrorKind::Decompress(format!("{} bytes decompressed, {body_len} declared", owned.len())), body_at));
+                return Err(Error::new(
+                    ErrorKind::Decompress(format!(
+                        "{} bytes decompressed, {body_len} declared",
+                        owned.len()
+                    )),
+                    body_at,
+                ));
             }
             &owned
         }

@@ -1,0 +1,253 @@
+//! Tile binning and front-to-back compositing with two opacities.
+//!
+//! Per pixel, Gaussians are visited in (depth, index) order. For the colour:
+//! `a = min(0.99, o * exp(power))`; skip if `a < 1/255`; `T' = T (1 - a)`; if `T' < 1e-4` the
+//! pixel is finished and this Gaussian is not added; else `C += c a T`, `T = T'`.
+//! The language image uses the language opacity with its own transmittance `Tl` and the same
+//! per-Gaussian rule (skip if its own alpha < 1/255), and stops where the colour stops:
+//! the paper's "colour transparency accumulation truncation".
+
+use rayon::prelude::*;
+
+use crate::fastexp::exp_neg;
+use crate::project::{Splat2d, ALPHA_MIN, TILE};
+
+pub const T_MIN: f32 = 1e-4;
+pub const ALPHA_MAX: f32 = 0.99;
+const TP: usize = (TILE * TILE) as usize;
+
+/// Per-frame output buffers.
+pub struct Accum {
+    pub width: u32,
+    pub height: u32,
+    /// RGB, row-major, background included.
+    pub color: Vec<f32>,
+    /// Final colour transmittance per pixel.
+    pub transmittance: Vec<f32>,
+    /// `lang_width` channels per pixel when language was rendered.
+    pub features: Option<Vec<f32>>,
+    pub lang_width: usize,
+    /// Tile-Gaussian pairs processed (work measure).
+    pub pairs: usize,
+}
+
+/// Bin splats into tiles (depth order) and composite every tile.
+/// `lang` holds the source Gaussians' language features when the language image is wanted.
+pub fn rasterize(
+    splats: &[Splat2d],
+    width: u32,
+    height: u32,
+    background: [f32; 3],
+    lang: Option<(&[f32], usize)>,
+) -> Accum {
+    let tiles_x = width.div_ceil(TILE) as usize;
+    let tiles_y = height.div_ceil(TILE) as usize;
+    // Sort by depth (positive finite floats sort like their bit patterns), ties by position.
+    let mut order: Vec<u64> = splats
+        .iter()
+        .enumerate()
+        .map(|(k, s)| ((s.depth.to_bits() as u64) << 32) | k as u64)
+        .collect();
+    order.par_sort_unstable();
+    // Tile rows -> splats touching that row, in depth order.
+    let mut rows: Vec<Vec<u32>> = vec![Vec::new(); tiles_y];
+    for key in &order {
+        let k = (*key & 0xffff_ffff) as u32;
+        let t = splats[k as usize].tiles;
+        for row in &mut rows[t[1] as usize..t[3] as usize] {
+            row.push(k);
+        }
+    }
+    let lw = lang.map_or(0, |(_, w)| w);
+    let row_results: Vec<(Vec<TileOut>, usize)> = rows
+        .par_iter()
+        .enumerate()
+        .map(|(ty, row)| {
+            let mut lists: Vec<Vec<u32>> = vec![Vec::new(); tiles_x];
+            for &k in row {
+                let t = splats[k as usize].tiles;
+                for list in &mut lists[t[0] as usize..t[2] as usize] {
+                    list.push(k);
+                }
+            }
+            let pairs: usize = lists.iter().map(Vec::len).sum();
+
+            let outs = lists
+                .iter()
+                .enumerate()
+                .map(|(tx, list)| {
+                    let x0 = tx as u32 * TILE;
+                    let y0 = ty as u32 * TILE;
+                    let w = (width - x0).min(TILE);
+                    let h = (height - y0).min(TILE);
+                    match lang {
+                        Some(l) => composite::<true>(splats, list, x0, y0, w, h, Some(l)),
+                        None => composite::<false>(splats, list, x0, y0, w, h, None),
+                    }
+                })
+                .collect();
+            (outs, pairs)
+        })
+        .collect();
+    let n = (width * height) as usize;
+    let mut acc = Accum {
+        width,
+        height,
+        color: vec![0.0; n * 3],
+        transmittance: vec![0.0; n],
+        features: lang.map(|_| vec![0.0; n * lw]),
+        lang_width: lw,
+        pairs: 0,
+    };
+    for (ty, (outs, pairs)) in row_results.into_iter().enumerate() {
+        acc.pairs += pairs;
+        for (tx, t) in outs.into_iter().enumerate() {
+            let (x0, y0) = (tx as u32 * TILE, ty as u32 * TILE);
+            for ly in 0..t.h {
+                for lx in 0..t.w {
+                    let l = (ly * TILE + lx) as usize;
+                    let p = ((y0 + ly) * width + x0 + lx) as usize;
+                    let tr = t.t[l];
+                    for c in 0..3 {
+                        acc.color[p * 3 + c] = t.c[l * 3 + c] + tr * background[c];
+                    }
+                    acc.transmittance[p] = tr;
+                    if let Some(f) = &mut acc.features {
+                        f[p * lw..(p + 1) * lw].copy_from_slice(&t.f[l * lw..(l + 1) * lw]);
+                    }
+                }
+            }
+        }
+    }
+    acc
+}
+
+struct TileOut {
+    w: u32,
+    h: u32,
+    c: Vec<f32>,
+    t: Vec<f32>,
+    f: Vec<f32>,
+}
+
+/// Composite one tile at pixel origin (x0, y0), size w x h.
+///
+/// Each row is processed as 16 fixed lanes with masks instead of branches, so the loop
+/// vectorises; the result is the per-pixel rule in the module comment, applied in list order.
+fn composite<const LANG: bool>(
+    splats: &[Splat2d],
+    list: &[u32],
+    x0: u32,
+    y0: u32,
+    w: u32,
+    h: u32,
+    lang: Option<(&[f32], usize)>,
+) -> TileOut {
+    const L: usize = TILE as usize;
+    let lw = lang.map_or(0, |(_, w)| w);
+    let mut t = [[1.0f32; L]; L];
+    let mut cr = [[0.0f32; L]; L];
+    let mut cg = [[0.0f32; L]; L];
+    let mut cb = [[0.0f32; L]; L];
+    // 1.0 while a pixel still accumulates, 0.0 once its colour transmittance terminated.
+    let mut live = [[0.0f32; L]; L];
+    let mut tl = [[1.0f32; L]; L];
+    let mut f = vec![0.0f32; if LANG { TP * lw } else { 0 }];
+    let mut wl = [0.0f32; L];
+    for row in live.iter_mut().take(h as usize) {
+        row[..w as usize].fill(1.0);
+    }
+    let mut remaining = (w * h) as f32;
+    let lane: [f32; L] = std::array::from_fn(|j| j as f32);
+    for &k in list {
+        if remaining <= 0.0 {
+            break;
+        }
+        let s = &splats[k as usize];
+        let xa0 = ((s.px[0] as u32).max(x0) - x0) as f32;
+        let xb0 = ((s.px[2] as u32).min(x0 + w) - x0) as f32;
+        let ya = (s.px[1] as u32).max(y0) - y0;
+        let yb = (s.px[3] as u32).min(y0 + h) - y0;
+        let [ca, cbk, cc] = s.conic;
+        let (o, ol) = (s.opacity, s.lang_opacity);
+        let [sr, sg, sb] = s.color;
+        let cx = s.mean[0] - x0 as f32;
+        for ly in ya..yb {
+            let dy = (y0 + ly) as f32 - s.mean[1];
+            // Exact span of this row inside the ellipse A dx^2 + 2B dx dy + C dy^2 <= r2, widened by
+            // one pixel against rounding; outside it alpha < 1/255 so nothing would be added.
+            let disc = cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2);
+            if !(disc >= 0.0) {
+                continue;
+            }
+            let sq = disc.sqrt();
+            let xa = ((cx + (-cbk * dy - sq) / ca).floor() - 1.0).max(xa0);
+            let xb = ((cx + (-cbk * dy + sq) / ca).ceil() + 2.0).min(xb0);
+            if !(xa < xb) {
+                continue;
+            }
+            let r = ly as usize;
+            let (tr, lv) = (&mut t[r], &mut live[r]);
+            let (rr, rg, rb) = (&mut cr[r], &mut cg[r], &mut cb[r]);
+            let tlr = &mut tl[r];
+            // Per-lane counts: a scalar float sum here would stop the loop from vectorising.
+            let mut terminated = [0.0f32; L];
+            for j in 0..L {
+                let dx = lane[j] - cx;
+                let inside = if lane[j] >= xa && lane[j] < xb {
+                    lv[j]
+                } else {
+                    0.0
+                };
+                let power = (-0.5 * (ca * dx * dx + cc * dy * dy) - cbk * dx * dy).min(0.0);
+                let g = exp_neg(power);
+                let a = (o * g).min(ALPHA_MAX);
+                let ok = if a >= ALPHA_MIN { inside } else { 0.0 };
+                let test_t = tr[j] * (1.0 - a);
+                let term = if test_t < T_MIN { ok } else { 0.0 };
+                let add = ok - term;
+                let wgt = add * a * tr[j];
+                rr[j] += sr * wgt;
+                rg[j] += sg * wgt;
+                rb[j] += sb * wgt;
+                tr[j] += add * (test_t - tr[j]);
+                lv[j] -= term;
+                terminated[j] = term;
+                if LANG {
+                    let al = (ol * g).min(ALPHA_MAX);
+                    // Language stops where the colour stopped (live after this Gaussian's update).
+                    let okl = if al >= ALPHA_MIN && lane[j] >= xa && lane[j] < xb {
+                        lv[j]
+                    } else {
+                        0.0
+                    };
+                    wl[j] = okl * al * tlr[j];
+                    tlr[j] -= wl[j];
+                }
+            }
+            remaining -= terminated.iter().sum::<f32>();
+            if LANG {
+                let (all, lw) = lang.expect("LANG implies features");
+                let feat = &all[s.index as usize * lw..(s.index as usize + 1) * lw];
+                for (j, wj) in wl.iter().enumerate() {
+                    if *wj != 0.0 {
+                        let base = (r * L + j) * lw;
+                        for (d, v) in f[base..base + lw].iter_mut().zip(feat) {
+                            *d += v * wj;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let mut c = vec![0.0f32; TP * 3];
+    let mut tt = vec![0.0f32; TP];
+    for i in 0..TP {
+        let (y, x) = (i / L, i % L);
+        c[i * 3] = cr[y][x];
+        c[i * 3 + 1] = cg[y][x];
+        c[i * 3 + 2] = cb[y][x];
+        tt[i] = t[y][x];
+    }
+    TileOut { w, h, c, t: tt, f }
+}
