@@ -83,6 +83,9 @@ pub fn project_one(
     if !(t.z > NEAR) {
         return None;
     }
+    if !g.opacity[i].is_finite() || (with_lang && !g.lang_opacity[i].is_finite()) {
+        return None;
+    }
     let o = sigmoid(g.opacity[i]);
     let ol = if with_lang {
         sigmoid(g.lang_opacity[i])

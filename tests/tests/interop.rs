@@ -1,0 +1,113 @@
+//! Readers of real third-party splat files (../shared/data; nobody on this project wrote them).
+
+use dlgs::interop::{ply, splat, spz};
+use dlgs::Limits;
+use dlgs_tests::{data, load, REAL_SCENES};
+
+#[test]
+fn every_real_scene_loads_with_its_declared_count_and_degree() {
+    for (rel, n, deg) in REAL_SCENES {
+        let g = load(rel);
+        assert_eq!(g.len(), *n, "{rel}");
+        assert_eq!(g.sh_degree, *deg, "{rel}");
+        g.check_shapes().unwrap();
+        g.check_finite().unwrap_or_else(|e| panic!("{rel}: {e}"));
+    }
+}
+
+#[test]
+fn the_same_three_gaussians_in_ply_splat_and_spz_agree() {
+    let p = load("tiny/metalsplatter_3-points-from-train.ply");
+    let s = splat::read_splat(
+        &std::fs::read(data("tiny/metalsplatter_3-points-from-train.splat")).unwrap(),
+    )
+    .unwrap();
+    let z = spz::read_spz(
+        &std::fs::read(data("tiny/metalsplatter_3-points-from-train.spz")).unwrap(),
+        &Limits::default(),
+    )
+    .unwrap();
+    assert_eq!(z.sh_degree, 3);
+    for i in 0..3 {
+        for a in 0..3 {
+            // .splat keeps f32 positions; SPZ uses 12 fractional bits (1/4096).
+            assert!(
+                (p.positions[i][a] - s.positions[i][a]).abs() < 1e-6,
+                "splat pos {i}"
+            );
+            assert!(
+                (p.positions[i][a] - z.positions[i][a]).abs() <= 0.5 / 4096.0 + 1e-6,
+                "spz pos {i}/{a}: {} vs {}",
+                p.positions[i][a],
+                z.positions[i][a]
+            );
+            assert!(
+                (p.log_scales[i][a] - z.log_scales[i][a]).abs() <= 1.0 / 32.0 + 1e-4,
+                "spz scale {i}"
+            );
+            assert!(
+                (p.log_scales[i][a] - s.log_scales[i][a]).abs() < 1e-4,
+                "splat scale {i}"
+            );
+        }
+        // Quaternions agree up to sign after normalisation.
+        let n = |q: [f32; 4]| {
+            let l = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+            q.map(|v| v / l)
+        };
+        let (qp, qz) = (n(p.rotations[i]), n(z.rotations[i]));
+        let dot: f32 = qp.iter().zip(qz).map(|(a, b)| a * b).sum();
+        assert!(dot.abs() > 0.995, "spz rotation {i}: {qp:?} vs {qz:?}");
+        // SH DC within SPZ's 8-bit colour step; rest within its SH step.
+        for k in 0..16 {
+            for c in 0..3 {
+                let (a, b) = (p.sh_of(i)[k * 3 + c], z.sh_of(i)[k * 3 + c]);
+                // SPZ buckets SH degree 1 to 5 bits and higher degrees to 4 bits (steps of 8 and 16 / 128).
+                let tol = match k {
+                    0 => 1.0 / (0.15 * 255.0),
+                    1..=3 => 4.5 / 128.0,
+                    _ => 8.5 / 128.0,
+                };
+                assert!(
+                    (a - b).abs() <= tol,
+                    "spz SH {i} coef {k} ch {c}: {a} vs {b}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn ply_write_read_round_trip_is_exact_with_and_without_language() {
+    for rel in [
+        "ply/gs3d-fork_lod3_tile_0_1971_sh3.ply",
+        "ply/v3dg_donut_mipsplatting_45624_sh0.ply",
+    ] {
+        let g = load(rel);
+        assert_eq!(ply::read_ply(&ply::write_ply(&g).unwrap()).unwrap(), g);
+        let l = dlgs_tests::with_synthetic_language(&g);
+        assert_eq!(ply::read_ply(&ply::write_ply(&l).unwrap()).unwrap(), l);
+    }
+}
+
+#[test]
+fn malformed_foreign_files_give_errors_not_panics() {
+    let good = std::fs::read(data("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply")).unwrap();
+    for cut in [0, 3, 10, 200, 1000, good.len() / 2, good.len() - 1] {
+        assert!(ply::read_ply(&good[..cut]).is_err(), "PLY cut at {cut}");
+    }
+    let mut huge = String::from_utf8_lossy(
+        &good[..good.windows(10).position(|w| w == b"end_header").unwrap()],
+    )
+    .replace("element vertex 1971", "element vertex 4000000000");
+    huge.push_str("end_header\n");
+    assert!(ply::read_ply(huge.as_bytes()).is_err());
+    assert!(splat::read_splat(&[0u8; 33]).is_err());
+    let spz_good = std::fs::read(data("tiny/metalsplatter_3-points-from-train.spz")).unwrap();
+    for cut in 0..spz_good.len() {
+        assert!(
+            spz::read_spz(&spz_good[..cut], &Limits::default()).is_err(),
+            "SPZ cut at {cut}"
+        );
+    }
+}
