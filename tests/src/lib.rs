@@ -64,3 +64,82 @@ pub fn with_synthetic_language(g: &Gaussians) -> Gaussians {
         .collect();
     out
 }
+
+/// A real multi-chunk `.dlgs` made from a real scene: `gops` intra GOPs of 2 frames each
+/// (positions nudged per GOP so GOPs differ), a META chunk, and unknown ancillary chunks at
+/// scene level and inside GOP 0 that readers must skip. Returns (file bytes, GOP contents).
+pub fn multi_gop_file(
+    g: &Gaussians,
+    gops: u32,
+    codec: dlgs::payload::raw_canonical::RawCodec,
+) -> (Vec<u8>, Vec<dlgs::Canonical>) {
+    use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
+    use dlgs::payload::raw_canonical;
+    let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
+    if g.has_language() {
+        scene.lang_levels = 3;
+        scene.lang_dims = 3;
+    }
+    scene.gop_length = 2;
+    scene.key_interval = 1;
+    scene.gop_count = gops;
+    scene.frame_count = gops * 2;
+    let mut w = Writer::new(Vec::new(), scene).unwrap();
+    w.scene_chunk(ChunkType::META, 0, br#"{"test":"multi_gop_file"}"#)
+        .unwrap();
+    w.scene_chunk(ChunkType(*b"XTRA"), 0, b"unknown ancillary, skip me")
+        .unwrap();
+    let mut canon = Vec::new();
+    for k in 0..gops {
+        let mut gk = g.clone();
+        for p in &mut gk.positions {
+            p[0] += 0.01 * k as f32;
+        }
+        let c = dlgs::Canonical::from_static(gk);
+        w.begin_gop().unwrap();
+        if k == 0 {
+            w.gop_chunk(ChunkType(*b"XTRA"), 0, &[7u8; 33]).unwrap();
+        }
+        w.gop_chunk(
+            ChunkType::CRAW,
+            FLAG_MUST_UNDERSTAND,
+            &raw_canonical::encode(&c, codec, 3).unwrap(),
+        )
+        .unwrap();
+        canon.push(c);
+    }
+    (w.finish().unwrap(), canon)
+}
+
+/// Decode every GOP through the random-access reader.
+pub fn decode_all_random(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec<dlgs::Canonical>> {
+    let mut dec = dlgs_decoder::Decoder::new(std::io::Cursor::new(bytes), limits)?;
+    (0..dec.scene().gop_count)
+        .map(|g| dec.gop_canonical(g).map(|c| (*c).clone()))
+        .collect()
+}
+
+/// Decode every GOP through the in-order stream reader.
+pub fn decode_all_stream(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec<dlgs::Canonical>> {
+    use dlgs::container::{ChunkType, StreamEvent, StreamReader};
+    let mut r = StreamReader::with_limits(bytes, limits)?;
+    let scene = r.scene().clone();
+    let mut out = Vec::new();
+    let mut ended = false;
+    while let Some(ev) = r.next_event()? {
+        match ev {
+            StreamEvent::GopChunk(c, p) if c.ty == ChunkType::CRAW => {
+                out.push(dlgs::payload::raw_canonical::decode(
+                    &p,
+                    c.payload_offset(),
+                    &scene,
+                    &limits,
+                )?);
+            }
+            StreamEvent::End(_) => ended = true,
+            _ => {}
+        }
+    }
+    assert!(ended, "stream finished without End");
+    Ok(out)
+}
