@@ -115,7 +115,8 @@ fn gaussians_behind_or_on_the_camera_plane_are_culled() {
 fn nan_and_inf_anywhere_cull_that_gaussian_only() {
     let good = one([0.5, 0.0, 3.0], [-2.0; 3], ID, 2.0);
     let reference = draw(&good);
-    let cases: Vec<Box<dyn Fn(&mut Gaussians)>> = vec![
+    type Poison = Box<dyn Fn(&mut Gaussians)>;
+    let cases: Vec<Poison> = vec![
         Box::new(|g| g.positions[0][1] = f32::NAN),
         Box::new(|g| g.positions[0][2] = f32::INFINITY),
         Box::new(|g| g.log_scales[0][0] = f32::NAN),
