@@ -92,14 +92,19 @@ impl<R: Read + Seek> FileReader<R> {
                 file_len,
             ));
         }
-        let tail = this.header_at(file_len - tail_size, file_len)?;
+        // Anything but a valid TAIL in the last 36 bytes means the file was cut short or never
+        // finished: say so rather than report whatever bytes happen to sit there.
+        let missing_tail = Error::new(
+            ErrorKind::MissingChunk(ChunkType::TAIL),
+            file_len - tail_size,
+        );
+        let tail = this
+            .header_at(file_len - tail_size, file_len)
+            .map_err(|_| missing_tail.clone())?;
         if tail.ty != ChunkType::TAIL || tail.len != TAIL_LEN as u64 || tail.gop != SCENE_LEVEL {
-            return Err(Error::new(
-                ErrorKind::MissingChunk(ChunkType::TAIL),
-                tail.offset,
-            ));
+            return Err(missing_tail);
         }
-        let tp = this.payload(&tail)?;
+        let tp = this.payload(&tail).map_err(|_| missing_tail.clone())?;
         let gidx_offset = ByteReader::new(&tp, tail.payload_offset()).u64("TAIL gidx offset")?;
         if gidx_offset < head.end() || gidx_offset >= tail.offset {
             return Err(Error::new(

@@ -2,6 +2,7 @@
 //! small real scenes, and an independent reference renderer.
 
 pub mod reference_render;
+pub mod vectors;
 
 use std::path::PathBuf;
 

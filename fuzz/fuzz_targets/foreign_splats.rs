@@ -1,0 +1,9 @@
+//! PLY, .splat and SPZ readers on arbitrary bytes.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = dlgs::interop::ply::read_ply(data);
+    let _ = dlgs::interop::splat::read_splat(data);
+    let _ = dlgs::interop::spz::read_spz(data, &dlgs::Limits::tiny());
+});

@@ -1,0 +1,188 @@
+//! The conformance vectors of format-spec/vectors, built from real data. `gen_vectors` writes
+//! them; `tests/conformance.rs` checks the committed files equal what this code builds and
+//! that readers give the listed checksums or errors.
+
+use dlgs::container::chunk::encode_header;
+use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
+use dlgs::payload::raw_canonical::{self, RawCodec};
+use dlgs::Canonical;
+
+use crate::{load, multi_gop_file, with_synthetic_language};
+
+pub struct Vector {
+    pub name: &'static str,
+    pub bytes: Vec<u8>,
+    /// Valid: None. Invalid: the error name a reader must give.
+    pub error: Option<&'static str>,
+    pub about: &'static str,
+}
+
+fn still(c: &Canonical, scene: SceneHeader, codec: RawCodec) -> Vec<u8> {
+    let mut w = Writer::new(Vec::new(), scene).unwrap();
+    w.begin_gop().unwrap();
+    w.gop_chunk(
+        ChunkType::CRAW,
+        FLAG_MUST_UNDERSTAND,
+        &raw_canonical::encode(c, codec, 19).unwrap(),
+    )
+    .unwrap();
+    w.finish().unwrap()
+}
+
+/// Re-encode the chunk header at `at` with a new length (keeping its CRC valid).
+fn set_len(b: &mut [u8], at: usize, len: u64) {
+    let ty = ChunkType(b[at..at + 4].try_into().unwrap());
+    let flags = u16::from_le_bytes([b[at + 4], b[at + 5]]);
+    let gop = u32::from_le_bytes(b[at + 8..at + 12].try_into().unwrap());
+    b[at..at + 24].copy_from_slice(&encode_header(ty, flags, gop, len));
+}
+
+pub fn all() -> Vec<Vector> {
+    let tiny = load("tiny/metalsplatter_3-points-from-train.ply");
+    let tiny_c = Canonical::from_static(tiny.clone());
+    let tiny_scene = SceneHeader::still(3, 3);
+    let base = still(&tiny_c, tiny_scene.clone(), RawCodec::None);
+    let lod3 = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    let lang = with_synthetic_language(&tiny);
+    let mut lang_scene = SceneHeader::still(3, 3);
+    lang_scene.lang_levels = 3;
+    lang_scene.lang_dims = 3;
+
+    let mut v = vec![
+        Vector {
+            name: "tiny-still",
+            bytes: base.clone(),
+            error: None,
+            about: "3 real Gaussians (SH 3), one GOP, raw CRAW; the annotated example of the spec",
+        },
+        Vector {
+            name: "tiny-3gop-zstd",
+            bytes: multi_gop_file(&tiny, 3, RawCodec::Zstd).0,
+            error: None,
+            about: "3 intra GOPs, zstd CRAW, META and unknown ancillary XTRA chunks to skip",
+        },
+        Vector {
+            name: "tiny-language",
+            bytes: still(&Canonical::from_static(lang), lang_scene, RawCodec::None),
+            error: None,
+            about: "language opacity and 3x3 language features",
+        },
+        Vector {
+            name: "lod3-still-zstd",
+            bytes: still(
+                &Canonical::from_static(lod3.clone()),
+                SceneHeader::still(1971, 3),
+                RawCodec::Zstd,
+            ),
+            error: None,
+            about: "a real 1971-Gaussian scene (GaussianSplats3D lod3 tile, MIT)",
+        },
+    ];
+    let mut bad = |name, error, about, f: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = base.clone();
+        f(&mut b);
+        v.push(Vector {
+            name,
+            bytes: b,
+            error: Some(error),
+            about,
+        });
+    };
+    bad("x-bad-magic", "BadMagic", "first byte is not 0x89", &|b| {
+        b[0] = b'P'
+    });
+    bad(
+        "x-version-2",
+        "UnsupportedVersion",
+        "major version 2",
+        &|b| b[8] = 2,
+    );
+    bad(
+        "x-head-header-crc",
+        "HeaderCrc",
+        "HEAD chunk header byte changed without fixing its CRC",
+        &|b| b[12 + 8] ^= 1,
+    );
+    bad(
+        "x-head-payload-crc",
+        "PayloadCrc",
+        "HEAD payload byte changed without fixing the payload CRC",
+        &|b| b[12 + 24 + 16] ^= 1,
+    );
+    bad(
+        "x-truncated",
+        "MissingChunk",
+        "file cut 10 bytes before its end: no valid TAIL",
+        &|b| b.truncate(b.len() - 10),
+    );
+    bad(
+        "x-huge-chunk",
+        "LimitExceeded",
+        "HEAD declares a 2^40-byte payload (header CRC valid)",
+        &|b| set_len(b, 12, 1 << 40),
+    );
+    bad(
+        "x-chunk-past-end",
+        "Truncated",
+        "HEAD declares more payload than the file holds (header CRC valid)",
+        &|b| {
+            let n = b.len() as u64;
+            set_len(b, 12, n)
+        },
+    );
+    let mut sh4 = tiny_scene.clone();
+    sh4.sh_degree = 4;
+    v.push(Vector {
+        name: "x-sh-degree-4",
+        bytes: still_unchecked(&tiny_c, sh4),
+        error: Some("InvalidField"),
+        about: "HEAD sh_degree 4 (v1 allows 0..=3)",
+    });
+    let mut wrong = tiny_scene.clone();
+    wrong.n_static = 4;
+    v.push(Vector {
+        name: "x-count-mismatch",
+        bytes: still_unchecked(&tiny_c, wrong),
+        error: Some("Payload"),
+        about: "HEAD says 4 static Gaussians, CRAW holds 3",
+    });
+    let mut w = Writer::new(Vec::new(), tiny_scene.clone()).unwrap();
+    w.begin_gop().unwrap();
+    w.gop_chunk(ChunkType(*b"Q9ZZ"), FLAG_MUST_UNDERSTAND, b"future")
+        .unwrap();
+    w.gop_chunk(
+        ChunkType::CRAW,
+        FLAG_MUST_UNDERSTAND,
+        &raw_canonical::encode(&tiny_c, RawCodec::None, 0).unwrap(),
+    )
+    .unwrap();
+    v.push(Vector {
+        name: "x-unknown-critical",
+        bytes: w.finish().unwrap(),
+        error: Some("UnknownCriticalChunk"),
+        about: "a must-understand chunk type this version does not define",
+    });
+    v
+}
+
+/// Like `still`, for headers that disagree with the payload (the writer does not check).
+fn still_unchecked(c: &Canonical, scene: SceneHeader) -> Vec<u8> {
+    let mut w = Writer::new(Vec::new(), scene).unwrap();
+    w.begin_gop().unwrap();
+    w.gop_chunk(
+        ChunkType::CRAW,
+        FLAG_MUST_UNDERSTAND,
+        &raw_canonical::encode(c, RawCodec::None, 0).unwrap(),
+    )
+    .unwrap();
+    w.finish().unwrap()
+}
+
+/// Lines of `expected.txt` for a valid vector: `name gop sha256`.
+pub fn expected_lines(v: &Vector) -> Vec<String> {
+    let gops = crate::decode_all_random(&v.bytes, dlgs::Limits::default()).unwrap();
+    gops.iter()
+        .enumerate()
+        .map(|(g, c)| format!("{} {g} {}", v.name, raw_canonical::canonical_digest(c)))
+        .collect()
+}

@@ -1,0 +1,76 @@
+//! Walks format-spec/vectors: valid files decode to the listed checksums (both readers),
+//! invalid files fail with the listed error, and the committed files are exactly what the
+//! generator builds today (so spec, vectors and code change together).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use dlgs::payload::raw_canonical::canonical_digest;
+use dlgs::Limits;
+use dlgs_tests::{decode_all_random, decode_all_stream, vectors};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../format-spec/vectors")
+}
+
+fn table(file: &str) -> Vec<Vec<String>> {
+    std::fs::read_to_string(root().join(file))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| l.split_whitespace().map(str::to_string).collect())
+        .collect()
+}
+
+#[test]
+fn valid_vectors_decode_to_the_listed_checksums() {
+    let mut want: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for row in table("expected.txt") {
+        want.entry(row[0].clone()).or_default().push(row[2].clone());
+    }
+    assert!(want.len() >= 4);
+    for (name, sums) in &want {
+        let bytes = std::fs::read(root().join("valid").join(format!("{name}.dlgs"))).unwrap();
+        for gops in [
+            decode_all_random(&bytes, Limits::default()).unwrap(),
+            decode_all_stream(&bytes, Limits::default()).unwrap(),
+        ] {
+            let got: Vec<String> = gops.iter().map(canonical_digest).collect();
+            assert_eq!(&got, sums, "{name}");
+        }
+    }
+}
+
+#[test]
+fn invalid_vectors_fail_with_the_listed_error() {
+    let rows = table("expected-errors.txt");
+    assert!(rows.len() >= 8);
+    for row in rows {
+        let bytes = std::fs::read(root().join("invalid").join(format!("{}.dlgs", row[0]))).unwrap();
+        let e = decode_all_random(&bytes, Limits::default()).expect_err(&row[0]);
+        assert_eq!(e.name(), row[1], "{} (random access): {e}", row[0]);
+        let e = decode_all_stream(&bytes, Limits::default()).expect_err(&row[0]);
+        // The stream reader cannot see a missing tail before reading the body, so it may name
+        // the first problem it meets; both must fail.
+        if row[0] != "x-truncated" {
+            assert_eq!(e.name(), row[1], "{} (stream): {e}", row[0]);
+        }
+    }
+}
+
+#[test]
+fn committed_vectors_equal_what_the_generator_builds() {
+    for v in vectors::all() {
+        let dir = if v.error.is_some() {
+            "invalid"
+        } else {
+            "valid"
+        };
+        let on_disk = std::fs::read(root().join(dir).join(format!("{}.dlgs", v.name))).unwrap();
+        assert!(
+            on_disk == v.bytes,
+            "{dir}/{}.dlgs is stale: run `cargo run -p dlgs-tests --bin gen_vectors`",
+            v.name
+        );
+    }
+}
