@@ -5,6 +5,7 @@
 //! (projection is per Gaussian, binning is sequential in depth order, each tile is composited
 //! by one thread).
 
+pub mod bench_scenes;
 pub mod camera;
 pub mod fastexp;
 pub mod image_out;
