@@ -59,34 +59,37 @@ pub fn rasterize(
         }
     }
     let lw = lang.map_or(0, |(_, w)| w);
-    let row_results: Vec<(Vec<TileOut>, usize)> = rows
+    // Tile lists, built per tile row in parallel, then every tile composited in parallel
+    // (finer than rows, so a few heavy rows do not leave a core idle).
+    let tile_lists: Vec<Vec<u32>> = rows
         .par_iter()
         .enumerate()
-        .map(|(ty, row)| {
+        .flat_map_iter(|(ty, row)| {
             let mut lists: Vec<Vec<u32>> = vec![Vec::new(); tiles_x];
             for &k in row {
-                let t = splats[k as usize].tiles;
-                for list in &mut lists[t[0] as usize..t[2] as usize] {
+                let (a, b) = band_tiles(&splats[k as usize], ty as u32);
+                for list in &mut lists[a..b] {
                     list.push(k);
                 }
             }
-            let pairs: usize = lists.iter().map(Vec::len).sum();
-
-            let outs = lists
-                .iter()
-                .enumerate()
-                .map(|(tx, list)| {
-                    let x0 = tx as u32 * TILE;
-                    let y0 = ty as u32 * TILE;
-                    let w = (width - x0).min(TILE);
-                    let h = (height - y0).min(TILE);
-                    match lang {
-                        Some(l) => composite::<true>(splats, list, x0, y0, w, h, Some(l)),
-                        None => composite::<false>(splats, list, x0, y0, w, h, None),
-                    }
-                })
-                .collect();
-            (outs, pairs)
+            lists
+        })
+        .collect();
+    let pairs = tile_lists.iter().map(Vec::len).sum();
+    let outs: Vec<TileOut> = tile_lists
+        .par_iter()
+        .enumerate()
+        .with_max_len(4)
+        .map(|(i, list)| {
+            let (tx, ty) = (i % tiles_x, i / tiles_x);
+            let x0 = tx as u32 * TILE;
+            let y0 = ty as u32 * TILE;
+            let w = (width - x0).min(TILE);
+            let h = (height - y0).min(TILE);
+            match lang {
+                Some(l) => composite::<true>(splats, list, x0, y0, w, h, Some(l)),
+                None => composite::<false>(splats, list, x0, y0, w, h, None),
+            }
         })
         .collect();
     let n = (width * height) as usize;
@@ -99,27 +102,74 @@ pub fn rasterize(
         lang_width: lw,
         pairs: 0,
     };
-    for (ty, (outs, pairs)) in row_results.into_iter().enumerate() {
-        acc.pairs += pairs;
-        for (tx, t) in outs.into_iter().enumerate() {
-            let (x0, y0) = (tx as u32 * TILE, ty as u32 * TILE);
-            for ly in 0..t.h {
-                for lx in 0..t.w {
-                    let l = (ly * TILE + lx) as usize;
-                    let p = ((y0 + ly) * width + x0 + lx) as usize;
-                    let tr = t.t[l];
-                    for c in 0..3 {
-                        acc.color[p * 3 + c] = t.c[l * 3 + c] + tr * background[c];
-                    }
-                    acc.transmittance[p] = tr;
-                    if let Some(f) = &mut acc.features {
-                        f[p * lw..(p + 1) * lw].copy_from_slice(&t.f[l * lw..(l + 1) * lw]);
-                    }
+    acc.pairs = pairs;
+    for (i, t) in outs.into_iter().enumerate() {
+        let (x0, y0) = ((i % tiles_x) as u32 * TILE, (i / tiles_x) as u32 * TILE);
+        for ly in 0..t.h {
+            for lx in 0..t.w {
+                let l = (ly * TILE + lx) as usize;
+                let p = ((y0 + ly) * width + x0 + lx) as usize;
+                let tr = t.t[l];
+                for c in 0..3 {
+                    acc.color[p * 3 + c] = t.c[l * 3 + c] + tr * background[c];
+                }
+                acc.transmittance[p] = tr;
+                if let Some(f) = &mut acc.features {
+                    f[p * lw..(p + 1) * lw].copy_from_slice(&t.f[l * lw..(l + 1) * lw]);
                 }
             }
         }
     }
     acc
+}
+
+/// Tiles `[a, b)` of tile row `ty` that the splat's ellipse really reaches: its bounding box
+/// is loose for thin, tilted ellipses. The x-extent of the ellipse over the row's band of pixel
+/// centres is found in closed form (left edge convex, right edge concave in dy), widened by
+/// one pixel like the per-row span in `composite`.
+fn band_tiles(s: &Splat2d, ty: u32) -> (usize, usize) {
+    let (t0, t1) = (s.tiles[0] as usize, s.tiles[2] as usize);
+    let [ca, cb, cc] = s.conic;
+    let det = ca * cc - cb * cb;
+    if !(det > 0.0) {
+        return (t0, t1);
+    }
+    let hx = (s.r2 * cc / det).sqrt();
+    let hy = (s.r2 * ca / det).sqrt();
+    let band0 = (ty * TILE) as f32 - s.mean[1];
+    let band1 = band0 + (TILE - 1) as f32;
+    let (d0, d1) = (band0.max(-hy), band1.min(hy));
+    if !(d0 <= d1) {
+        return (t0, t0);
+    }
+    let edge = |dy: f32, sign: f32| {
+        (-cb * dy
+            + sign
+                * (cb * cb * dy * dy - ca * (cc * dy * dy - s.r2))
+                    .max(0.0)
+                    .sqrt())
+            / ca
+    };
+    // Where the ellipse is widest to the right (+) and to the left (-).
+    let d_right = -cb * hx / cc;
+    let right = if (d0..=d1).contains(&d_right) {
+        hx
+    } else {
+        edge(d0, 1.0).max(edge(d1, 1.0))
+    };
+    let left = if (d0..=d1).contains(&-d_right) {
+        -hx
+    } else {
+        edge(d0, -1.0).min(edge(d1, -1.0))
+    };
+    let lo = ((s.mean[0] + left - 1.0) / TILE as f32).floor();
+    let hi = ((s.mean[0] + right + 2.0) / TILE as f32).floor() + 1.0;
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (t0, t1);
+    }
+    let a = (lo.max(t0 as f32) as usize).min(t1);
+    let b = (hi.max(0.0) as usize).clamp(a, t1);
+    (a, b)
 }
 
 struct TileOut {

@@ -134,3 +134,38 @@ pub fn check_payload_crc(info: &ChunkInfo, payload: &[u8], stored: u32) -> Resul
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32c_check_value_from_the_spec() {
+        assert_eq!(crc32c::crc32c(b"123456789"), 0xE306_9283);
+    }
+
+    #[test]
+    fn header_round_trip_and_every_single_bit_flip_is_caught() {
+        let h = encode_header(ChunkType::CRAW, FLAG_MUST_UNDERSTAND, 7, 123_456);
+        let info = decode_header(&h, 40).unwrap();
+        assert_eq!(
+            (info.ty, info.flags, info.gop, info.len, info.offset),
+            (ChunkType::CRAW, 1, 7, 123_456, 40)
+        );
+        assert_eq!(info.end(), 40 + 28 + 123_456);
+        for bit in 0..24 * 8 {
+            let mut b = h;
+            b[bit / 8] ^= 1 << (bit % 8);
+            if !cfg!(fuzzing) {
+                assert!(decode_header(&b, 0).is_err(), "flip of bit {bit} accepted");
+            }
+        }
+    }
+
+    #[test]
+    fn chunk_type_alphabet() {
+        assert!(ChunkType::is_valid(*b"ab 9"));
+        assert!(!ChunkType::is_valid(*b"AB\0C"));
+        assert!(!ChunkType::is_valid([0xff, b'A', b'B', b'C']));
+    }
+}
