@@ -1,4 +1,10 @@
-//! Niantic SPZ, legacy gzip versions 2 and 3 (read). Layout after gunzip:
+//! Niantic SPZ versions 2, 3 (gzip) and 4 (plain header + TOC + zstd streams), read.
+//! v4: 32-byte header {magic u32, version u32, numPoints u32, shDegree u8, fractionalBits u8,
+//! flags u8, numStreams u8, tocByteOffset u32, reserved[12]}, optional extension records,
+//! TOC of numStreams x {compressed u64, uncompressed u64}, then one zstd frame per stream in
+//! the order positions, alphas, colours, scales, rotations (smallest-three), SH.
+//! Extensions are skipped (the SH min/max quantisation extension is not applied).
+//! v2/v3 layout after gunzip:
 //! 16-byte header {magic "NGSP" u32, version u32, numPoints u32, shDegree u8, fractionalBits u8,
 //! flags u8, reserved u8}, then planar: positions (24-bit fixed, 9 B), alphas (1 B),
 //! colours (3 B), scales (3 B), rotations (v2: 3 B xyz, v3: 4 B smallest-three), SH (u8).
@@ -31,10 +37,11 @@ const SH_FLIP: [f32; 16] = [
 ];
 
 pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
+    if data.len() >= 4 && u32::from_le_bytes(data[0..4].try_into().expect("4 bytes")) == MAGIC {
+        return read_v4(data, limits);
+    }
     if data.len() < 2 || data[0..2] != [0x1f, 0x8b] {
-        return Err(err(
-            "not a gzip SPZ (v2/v3); SPZ v4 (NGSP + zstd) is not supported yet",
-        ));
+        return Err(err("neither a gzip SPZ (v2/v3) nor an NGSP v4 header"));
     }
     let mut raw = Vec::new();
     flate2::read::GzDecoder::new(data)
@@ -51,35 +58,112 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     let version = u32at(4);
     if !(2..=3).contains(&version) {
         return Err(err(format!(
-            "version {version} not supported (2 and 3 are)"
+            "gzip container with version {version}; 2 and 3 are supported"
         )));
     }
-    let n = u32at(8) as usize;
-    let degree = raw[12];
-    let frac = raw[13];
+    let (n, degree, frac) = (u32at(8) as usize, raw[12], raw[13]);
+    check_header(degree, frac)?;
+    let rot_bytes = if version >= 3 { 4 } else { 3 };
+    let sizes = stream_sizes(n, degree, rot_bytes)?;
+    let need = 16 + sizes.iter().sum::<usize>();
+    if raw.len() != need {
+        return Err(err(format!(
+            "{n} points need {need} bytes, {} present",
+            raw.len()
+        )));
+    }
+    let mut streams = Vec::with_capacity(6);
+    let mut at = 16;
+    for len in sizes {
+        streams.push(&raw[at..at + len]);
+        at += len;
+    }
+    Ok(unpack(n, degree, frac, version >= 3, &streams))
+}
+
+fn check_header(degree: u8, frac: u8) -> Result<()> {
     if degree > 3 {
         return Err(err(format!("SH degree {degree} > 3")));
     }
     if frac > 23 {
         return Err(err(format!("fractional bits {frac} > 23")));
     }
-    let rot_bytes = if version >= 3 { 4 } else { 3 };
+    Ok(())
+}
+
+/// Byte sizes of the six planar streams.
+fn stream_sizes(n: usize, degree: u8, rot_bytes: usize) -> Result<[usize; 6]> {
     let rest = sh_coeffs(degree) - 1;
-    let per = 9 + 1 + 3 + 3 + rot_bytes + rest * 3;
-    let need = 16 + n.checked_mul(per).ok_or_else(|| err("size overflow"))?;
-    if raw.len() != need {
+    let m = |k: usize| n.checked_mul(k).ok_or_else(|| err("size overflow"));
+    Ok([m(9)?, m(1)?, m(3)?, m(3)?, m(rot_bytes)?, m(rest * 3)?])
+}
+
+fn read_v4(data: &[u8], limits: &Limits) -> Result<Gaussians> {
+    if data.len() < 32 {
+        return Err(err("v4 header truncated"));
+    }
+    let u32at = |i: usize| u32::from_le_bytes(data[i..i + 4].try_into().expect("4 bytes"));
+    let version = u32at(4);
+    if version != 4 {
         return Err(err(format!(
-            "{} points need {need} bytes, {} present",
-            n,
-            raw.len()
+            "uncompressed NGSP header with version {version}; only 4 is defined"
         )));
     }
-    let pos = &raw[16..16 + 9 * n];
-    let alpha = &raw[16 + 9 * n..16 + 10 * n];
-    let col = &raw[16 + 10 * n..16 + 13 * n];
-    let scl = &raw[16 + 13 * n..16 + 16 * n];
-    let rot = &raw[16 + 16 * n..16 + (16 + rot_bytes) * n];
-    let sh = &raw[16 + (16 + rot_bytes) * n..];
+    let (n, degree, frac, streams_n, toc) = (
+        u32at(8) as usize,
+        data[12],
+        data[13],
+        data[15] as usize,
+        u32at(16) as usize,
+    );
+    check_header(degree, frac)?;
+    if streams_n != 6 {
+        return Err(err(format!("{streams_n} streams; v4 defines 6")));
+    }
+    if toc < 32 || toc.checked_add(6 * 16).is_none_or(|e| e > data.len()) {
+        return Err(err("TOC outside the file"));
+    }
+    let sizes = stream_sizes(n, degree, 4)?;
+    if sizes.iter().sum::<usize>() as u64 > limits.max_alloc {
+        return Err(err("declared point count exceeds the allocation limit"));
+    }
+    let u64at = |i: usize| u64::from_le_bytes(data[i..i + 8].try_into().expect("8 bytes"));
+    let mut at = toc + 6 * 16;
+    let mut owned = Vec::with_capacity(6);
+    for (k, want) in sizes.iter().enumerate() {
+        let (comp, uncomp) = (u64at(toc + k * 16), u64at(toc + k * 16 + 8));
+        if uncomp != *want as u64 {
+            return Err(err(format!(
+                "stream {k}: {uncomp} bytes declared, {want} expected for {n} points"
+            )));
+        }
+        let end = (at as u64)
+            .checked_add(comp)
+            .filter(|e| *e <= data.len() as u64)
+            .ok_or_else(|| err(format!("stream {k} runs past the end")))?
+            as usize;
+        let out = zstd::bulk::decompress(&data[at..end], *want)
+            .map_err(|e| err(format!("stream {k}: zstd: {e}")))?;
+        if out.len() != *want {
+            return Err(err(format!(
+                "stream {k}: {} bytes decompressed, {want} expected",
+                out.len()
+            )));
+        }
+        owned.push(out);
+        at = end;
+    }
+    let streams: Vec<&[u8]> = owned.iter().map(Vec::as_slice).collect();
+    Ok(unpack(n, degree, frac, true, &streams))
+}
+
+/// Decode the six planar streams (sizes already checked).
+fn unpack(n: usize, degree: u8, frac: u8, smallest_three: bool, streams: &[&[u8]]) -> Gaussians {
+    let [pos, alpha, col, scl, rot, sh] = [
+        streams[0], streams[1], streams[2], streams[3], streams[4], streams[5],
+    ];
+    let rest = sh_coeffs(degree) - 1;
+    let version = if smallest_three { 3 } else { 2 };
     let mut g = Gaussians::new(degree, 0);
     let scale = 1.0 / (1u32 << frac) as f32;
     let flip = [1.0f32, -1.0, -1.0];
@@ -132,5 +216,5 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
             }
         }
     }
-    Ok(g)
+    g
 }

@@ -111,3 +111,54 @@ fn malformed_foreign_files_give_errors_not_panics() {
         );
     }
 }
+
+fn fixture(name: &str) -> Vec<u8> {
+    std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fixtures")
+            .join(name),
+    )
+    .unwrap()
+}
+
+#[test]
+fn spz_v4_from_splat_transform_matches_its_v3_and_the_source_ply() {
+    let v4 = spz::read_spz(&fixture("gs3d_lod3_1971.v4.spz"), &Limits::default()).unwrap();
+    let v3 = spz::read_spz(&fixture("gs3d_lod3_1971.v3.spz"), &Limits::default()).unwrap();
+    let src = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    assert_eq!((v4.len(), v4.sh_degree), (1971, 3));
+    assert!(v4 == v3, "v4 and v3 of the same encoder differ");
+    for i in 0..src.len() {
+        for a in 0..3 {
+            assert!(
+                (v4.positions[i][a] - src.positions[i][a]).abs() <= 0.5 / 4096.0 + 1e-5,
+                "position {i}"
+            );
+            // SPZ stores u8((s + 10) * 16): log-scales outside [-10, 5.94] are clamped.
+            let want = src.log_scales[i][a].clamp(-10.0, 255.0 / 16.0 - 10.0);
+            assert!(
+                (v4.log_scales[i][a] - want).abs() <= 1.0 / 32.0 + 1e-4,
+                "scale {i}: {} vs {}",
+                v4.log_scales[i][a],
+                src.log_scales[i][a]
+            );
+        }
+    }
+    let tiny = spz::read_spz(
+        &fixture("metalsplatter_3-points.v4.spz"),
+        &Limits::default(),
+    )
+    .unwrap();
+    assert_eq!(tiny.len(), 3);
+    // Damaged v4 files fail cleanly.
+    let good = fixture("gs3d_lod3_1971.v4.spz");
+    for cut in (0..good.len()).step_by(97) {
+        assert!(
+            spz::read_spz(&good[..cut], &Limits::default()).is_err(),
+            "cut {cut}"
+        );
+    }
+    let mut bad = good.clone();
+    bad[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(spz::read_spz(&bad, &Limits::default()).is_err());
+}
