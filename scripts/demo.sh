@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # The main job, end to end on a real scene: encode -> inspect -> decode -> render -> RD numbers.
-# Usage: bash scripts/demo.sh [SCENE] (default: the 22,589-Gaussian gsplat scene, SH 3)
+# Usage: bash scripts/demo.sh [SCENE] (default: the 45,624-Gaussian Mip-Splatting donut)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cargo build --release -q -p dlgs-cli
 DATA="${DLGS_DATA:-../shared/data}"
-SCENE="${1:-$DATA/ply/gsplat_DATA_new_22589_sh3.ply}"
+SCENE="${1:-$DATA/ply/v3dg_donut_mipsplatting_45624_sh0.ply}"
 OUT=out/demo
 mkdir -p "$OUT"
 B=target/release/dlgs
