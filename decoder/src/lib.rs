@@ -1,19 +1,56 @@
-//! `dlgs-decoder`: random-access decoding of `.dlgs` streams.
+//! `dlgs-decoder`: random-access decoding of `.dlgs` streams, including the dynamic
+//! Gaussians at any time t (format-spec §7).
+
+pub mod deform;
+pub mod interp;
+pub mod mlp;
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 use std::sync::Arc;
 
-use dlgs::container::{ChunkType, FileReader, SceneHeader};
-use dlgs::payload::raw_canonical;
+use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
+use dlgs::model::{DynamicGop, Gaussians, TimePoint};
+use dlgs::payload::time_features::{self, TfeaBody};
+use dlgs::payload::{mlp_weights, raw_canonical};
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
+
+pub use deform::{Deformer, FrameOptions};
+
+/// One decoded GOP: canonical Gaussians and, if the scene has dynamics, its deformation field.
+pub struct DecodedGop {
+    pub index: u32,
+    pub canonical: Arc<Canonical>,
+    pub dynamic: Option<DynamicGop>,
+    pub deformer: Option<Deformer>,
+}
+
+/// The Gaussians of one instant: the GOP's static set (shared, untouched) and the deformed
+/// dynamic set.
+pub struct Frame {
+    pub time: TimePoint,
+    pub gop: Arc<DecodedGop>,
+    pub dynamics: Gaussians,
+}
+
+impl Frame {
+    pub fn statics(&self) -> &Gaussians {
+        &self.gop.canonical.statics
+    }
+    /// Static then dynamic Gaussians in one set, for renderers and exporters.
+    pub fn merged(&self) -> Gaussians {
+        let mut g = self.statics().clone();
+        g.extend(&self.dynamics);
+        g
+    }
+}
 
 /// Decodes GOPs and frames from a seekable `.dlgs` source.
 pub struct Decoder<R: Read + Seek> {
     reader: FileReader<R>,
-    /// The last decoded GOP's canonical state, reused while playback stays in that GOP.
-    cached: Option<(u32, Arc<Canonical>)>,
+    /// The last decoded GOP, reused while playback stays in it.
+    cached: Option<Arc<DecodedGop>>,
 }
 
 impl Decoder<BufReader<File>> {
@@ -26,6 +63,16 @@ impl Decoder<BufReader<File>> {
         })?;
         Self::new(BufReader::new(f), Limits::default())
     }
+}
+
+fn video_error(e: dlgs_video::VideoError, at: u64) -> Error {
+    Error::new(
+        ErrorKind::Payload {
+            chunk: ChunkType::TFEA,
+            reason: e.to_string(),
+        },
+        at,
+    )
 }
 
 impl<R: Read + Seek> Decoder<R> {
@@ -45,48 +92,94 @@ impl<R: Read + Seek> Decoder<R> {
 
     /// The frame index shown at time `t` seconds (frame f covers [f/fps, (f+1)/fps)).
     pub fn frame_index_at(&self, t: f64) -> Result<u32> {
-        let s = self.scene();
-        if !t.is_finite() || t < 0.0 || t > s.duration_seconds() {
-            return Err(Error::new(
-                ErrorKind::Request(format!(
-                    "time {t} s outside the stream [0, {:.4}] s",
-                    s.duration_seconds()
-                )),
-                0,
-            ));
-        }
-        Ok(((t * s.fps()).floor() as u64).min(s.frame_count as u64 - 1) as u32)
+        Ok(self.scene().locate(t)?.frame)
     }
 
-    /// Decode the canonical Gaussians of GOP `g`.
-    pub fn gop_canonical(&mut self, g: u32) -> Result<Arc<Canonical>> {
-        if let Some((cg, c)) = &self.cached {
-            if *cg == g {
+    fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
+        chunks.iter().find(|c| c.ty == ty).copied()
+    }
+
+    /// Decode GOP `g`: canonical Gaussians, time features and decoders (cached).
+    pub fn gop(&mut self, g: u32) -> Result<Arc<DecodedGop>> {
+        if let Some(c) = &self.cached {
+            if c.index == g {
                 return Ok(c.clone());
             }
         }
         let chunks = self.reader.gop_chunks(g)?;
-        let craw = chunks.iter().find(|c| c.ty == ChunkType::CRAW).copied();
-        let Some(craw) = craw else {
-            let at = self.reader.gop_entry(g)?.offset;
-            return Err(Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), at));
-        };
-        let p = self.reader.payload(&craw)?;
+        let gop_at = self.reader.gop_entry(g)?.offset;
+        let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        let c = Arc::new(raw_canonical::decode(
+        let craw = Self::find(&chunks, ChunkType::CRAW)
+            .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
+        let p = self.reader.payload(&craw)?;
+        let canonical = Arc::new(raw_canonical::decode(
             &p,
             craw.payload_offset(),
-            self.reader.scene(),
+            &scene,
             &limits,
         )?);
-        self.cached = Some((g, c.clone()));
-        Ok(c)
+        let mut dynamic = None;
+        if scene.n_dynamic > 0 {
+            let tfea = Self::find(&chunks, ChunkType::TFEA)
+                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::TFEA), gop_at))?;
+            let mlpw = Self::find(&chunks, ChunkType::MLPW)
+                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::MLPW), gop_at))?;
+            let p = self.reader.payload(&tfea)?;
+            let at = tfea.payload_offset();
+            let features = match time_features::decode(&p, at, &scene, &limits)? {
+                TfeaBody::Exact(f) => f,
+                TfeaBody::Hevc {
+                    tiling,
+                    ranges,
+                    packets,
+                } => {
+                    let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
+                    let video = dlgs_video::decode_gray12(
+                        &refs,
+                        tiling.width() as u32,
+                        tiling.height() as u32,
+                        tiling.keys,
+                    )
+                    .map_err(|e| video_error(e, at))?;
+                    time_features::untile(&video.frames, &tiling, &ranges)
+                }
+            };
+            let p = self.reader.payload(&mlpw)?;
+            let mlps = mlp_weights::decode(&p, mlpw.payload_offset(), &scene, &limits)?;
+            dynamic = Some(DynamicGop { features, mlps });
+        }
+        let deformer = dynamic
+            .as_ref()
+            .map(|d| Deformer::new(&canonical.dynamics, d, scene.deform_model));
+        let gop = Arc::new(DecodedGop {
+            index: g,
+            canonical,
+            dynamic,
+            deformer,
+        });
+        self.cached = Some(gop.clone());
+        Ok(gop)
     }
 
-    /// The Gaussians to render at time `t` seconds.
-    pub fn frame_at(&mut self, t: f64) -> Result<Arc<Canonical>> {
-        let f = self.frame_index_at(t)?;
-        let g = f / self.scene().gop_length;
-        self.gop_canonical(g)
+    /// Decode the canonical Gaussians of GOP `g`.
+    pub fn gop_canonical(&mut self, g: u32) -> Result<Arc<Canonical>> {
+        Ok(self.gop(g)?.canonical.clone())
+    }
+
+    /// The Gaussians at any time `t` seconds in `[0, duration]`, between frames included:
+    /// key features are interpolated at the exact fraction (4D frame interpolation).
+    pub fn frame_at(&mut self, t: f64, opts: &FrameOptions) -> Result<Frame> {
+        let time = self.scene().locate(t)?;
+        let gop = self.gop(time.gop)?;
+        let dynamics = match &gop.deformer {
+            Some(d) => d.frame(&gop.canonical.dynamics, time.key, time.delta, opts),
+            None => gop.canonical.dynamics.clone(),
+        };
+        Ok(Frame {
+            time,
+            gop,
+            dynamics,
+        })
     }
 }

@@ -18,6 +18,8 @@ impl ChunkType {
     pub const TAIL: ChunkType = ChunkType(*b"TAIL");
     /// Raw (uncompressed-float) canonical Gaussians, §6.1.
     pub const CRAW: ChunkType = ChunkType(*b"CRAW");
+    pub const TFEA: ChunkType = ChunkType(*b"TFEA");
+    pub const MLPW: ChunkType = ChunkType(*b"MLPW");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes

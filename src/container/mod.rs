@@ -23,6 +23,8 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::GIDX,
     ChunkType::TAIL,
     ChunkType::CRAW,
+    ChunkType::TFEA,
+    ChunkType::MLPW,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

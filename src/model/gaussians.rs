@@ -135,8 +135,27 @@ impl Gaussians {
         }
     }
 
+    /// A copy without language channels.
+    pub fn without_language(&self) -> Gaussians {
+        let mut out = self.clone();
+        out.lang_width = 0;
+        out.lang.clear();
+        out.lang_opacity.clear();
+        out
+    }
+
     /// Concatenate `other` (same layout) onto `self`.
     pub fn extend(&mut self, other: &Gaussians) {
+        if other.sh_degree == self.sh_degree && other.lang_width == self.lang_width {
+            self.positions.extend_from_slice(&other.positions);
+            self.log_scales.extend_from_slice(&other.log_scales);
+            self.rotations.extend_from_slice(&other.rotations);
+            self.opacity.extend_from_slice(&other.opacity);
+            self.lang_opacity.extend_from_slice(&other.lang_opacity);
+            self.sh.extend_from_slice(&other.sh);
+            self.lang.extend_from_slice(&other.lang);
+            return;
+        }
         for i in 0..other.len() {
             self.push_from(other, i);
         }

@@ -1,5 +1,7 @@
 //! The in-memory scene model.
 
+pub mod dynamic;
 pub mod gaussians;
 
+pub use dynamic::{DeformMlps, DynamicGop, Layer, Mlp, MlpRole, TimeFeatures, TimePoint};
 pub use gaussians::{sh_coeffs, Canonical, Gaussians};

@@ -1,0 +1,77 @@
+//! The reference implementation's interpolators (format-spec §7.2), reproduced exactly,
+//! including its guards.
+
+/// `F.normalize(q, eps=1e-12)`: a zero quaternion stays zero.
+#[inline]
+pub fn normalize4(q: [f32; 4]) -> [f32; 4] {
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        .sqrt()
+        .max(1e-12);
+    [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
+}
+
+/// Cubic Hermite between `p0` and `p1` with tangents `m0`, `m1` (not scaled by the interval).
+#[inline]
+pub fn hermite(p0: [f32; 3], m0: [f32; 3], p1: [f32; 3], m1: [f32; 3], d: f32) -> [f32; 3] {
+    let (d2, d3) = (d * d, d * d * d);
+    let h00 = 2.0 * d3 - 3.0 * d2 + 1.0;
+    let h10 = d3 - 2.0 * d2 + d;
+    let h01 = -2.0 * d3 + 3.0 * d2;
+    let h11 = d3 - d2;
+    std::array::from_fn(|a| h00 * p0[a] + h10 * m0[a] + h01 * p1[a] + h11 * m1[a])
+}
+
+/// The reference's `slerp_interpolate` on already normalised inputs: clamped dot, floored
+/// angle and sine, weights renormalised to sum 1, no shortest-arc flip, then normalised.
+#[inline]
+pub fn slerp_reference(q0: [f32; 4], q1: [f32; 4], d: f32) -> [f32; 4] {
+    let dot = (q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3])
+        .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
+    let omega = dot.acos().max(1e-4);
+    let s = omega.sin().max(1e-4);
+    let mut p0 = ((1.0 - d) * omega).sin() / s;
+    let mut p1 = (d * omega).sin() / s;
+    let sum = (p0 + p1).max(1e-4);
+    p0 /= sum;
+    p1 /= sum;
+    let r: [f32; 4] = std::array::from_fn(|a| p0 * q0[a] + p1 * q1[a]);
+    if r.iter().map(|v| v.abs()).sum::<f32>() <= 1e-4 {
+        return q0;
+    }
+    normalize4(r)
+}
+
+#[inline]
+pub fn lerp(a: f32, b: f32, d: f32) -> f32 {
+    a * (1.0 - d) + b * d
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hermite_hits_the_keys() {
+        let (p0, p1) = ([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]);
+        let m = [0.3, -0.2, 9.0];
+        assert_eq!(hermite(p0, m, p1, m, 0.0), p0);
+        assert_eq!(hermite(p0, m, p1, m, 1.0), p1);
+    }
+
+    #[test]
+    fn slerp_ends_and_degenerate_inputs() {
+        let a = normalize4([1.0, 0.0, 0.0, 0.0]);
+        let b = normalize4([0.0, 1.0, 0.0, 0.0]);
+        let m = slerp_reference(a, b, 0.5);
+        assert!((m[0] - m[1]).abs() < 1e-6 && (m[0] - 0.70710677).abs() < 1e-4);
+        let e = slerp_reference(a, b, 0.0);
+        assert!((e[0] - 1.0).abs() < 1e-4);
+        // Zero quaternions: no NaN, the reference returns q0 (zero), the renderer maps it to
+        // the identity.
+        let z = slerp_reference([0.0; 4], [0.0; 4], 0.3);
+        assert!(z.iter().all(|v| v.is_finite()));
+        // Opposite quaternions (no shortest-arc flip): finite.
+        let o = slerp_reference(a, [-1.0, 0.0, 0.0, 0.0], 0.5);
+        assert!(o.iter().all(|v| v.is_finite()));
+    }
+}

@@ -1,0 +1,415 @@
+//! `TFEA`: the key time features of one GOP (format-spec §6.2). Either exact `f32` (zstd) or
+//! tiled into `4 side x (C/4) side` 12-bit gray images that an HEVC encoder codes as one
+//! K-frame sequence. This module owns the framing, tiling and quantisation; the HEVC bitstream
+//! itself is produced and decoded by `dlgs-video` (FFmpeg), outside this crate.
+
+use crate::bytes::{ByteReader, PutLe};
+use crate::container::{ChunkType, SceneHeader};
+use crate::error::{Error, ErrorKind, Result};
+use crate::model::TimeFeatures;
+use crate::Limits;
+
+/// Largest value of a 12-bit sample.
+pub const Q_MAX: u16 = 4095;
+/// Tiles per image row (the reference's 4 x 4 layout for 16 channels).
+pub const TILE_COLUMNS: usize = 4;
+
+/// How the features are stored.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TfeaBody {
+    /// Exact f32, `(N, K, C)` order, one zstd frame.
+    Exact(TimeFeatures),
+    /// Quantised 12-bit tiles coded as an HEVC stream, packets in decode order.
+    Hevc {
+        tiling: Tiling,
+        /// One (lo, hi) per channel.
+        ranges: Vec<(f32, f32)>,
+        packets: Vec<Vec<u8>>,
+    },
+}
+
+/// Geometry of the tiled images.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Tiling {
+    pub n: usize,
+    pub keys: usize,
+    pub channels: usize,
+    /// Tile side; `side * side >= n`.
+    pub side: usize,
+}
+
+impl Tiling {
+    /// The smallest tiling for `n` Gaussians whose image sides are even (x265 needs that).
+    pub fn for_count(n: usize, keys: usize, channels: usize) -> Self {
+        let mut side = (n as f64).sqrt().ceil() as usize;
+        while side * side < n {
+            side += 1;
+        }
+        let mut t = Tiling {
+            n,
+            keys,
+            channels,
+            side: side.max(1),
+        };
+        if t.height() % 2 == 1 || t.width() % 2 == 1 {
+            t.side += 1;
+        }
+        t
+    }
+    pub fn tile_rows(&self) -> usize {
+        self.channels.div_ceil(TILE_COLUMNS)
+    }
+    pub fn width(&self) -> usize {
+        TILE_COLUMNS * self.side
+    }
+    pub fn height(&self) -> usize {
+        self.tile_rows() * self.side
+    }
+    /// Pixel index of Gaussian `i`'s channel `c`: `frame[(c/4) side + i/side][(c%4) side + i%side]`.
+    #[inline]
+    pub fn pixel(&self, i: usize, c: usize) -> usize {
+        let (row, col) = (
+            (c / TILE_COLUMNS) * self.side + i / self.side,
+            (c % TILE_COLUMNS) * self.side + i % self.side,
+        );
+        row * self.width() + col
+    }
+}
+
+/// Per-channel (lo, hi) of the features over all keys; `per_gop` gives every channel the
+/// global range instead (the reference's single min/max).
+pub fn ranges(f: &TimeFeatures, per_gop: bool) -> Vec<(f32, f32)> {
+    let mut r = vec![(f32::INFINITY, f32::NEG_INFINITY); f.channels];
+    for chunk in f.data.chunks_exact(f.channels.max(1)) {
+        for (c, &v) in chunk.iter().enumerate() {
+            r[c].0 = r[c].0.min(v);
+            r[c].1 = r[c].1.max(v);
+        }
+    }
+    for x in &mut r {
+        if x.0 > x.1 {
+            *x = (0.0, 0.0);
+        }
+    }
+    if per_gop {
+        let lo = r.iter().map(|x| x.0).fold(f32::INFINITY, f32::min);
+        let hi = r.iter().map(|x| x.1).fold(f32::NEG_INFINITY, f32::max);
+        r.iter_mut().for_each(|x| *x = (lo, hi));
+    }
+    r
+}
+
+/// `round((x - lo) / (hi - lo) * 4095)` clamped; a constant channel (`hi <= lo`) gives 0.
+#[inline]
+pub fn quantise(x: f32, (lo, hi): (f32, f32)) -> u16 {
+    if !(hi > lo) {
+        return 0;
+    }
+    let q = ((x - lo) / (hi - lo) * Q_MAX as f32).round();
+    q.clamp(0.0, Q_MAX as f32) as u16
+}
+
+/// `lo + q * ((hi - lo) / 4095)`, evaluated in f32 exactly in this order (§6.2).
+#[inline]
+pub fn dequantise(q: u16, (lo, hi): (f32, f32)) -> f32 {
+    if !(hi > lo) {
+        return lo;
+    }
+    lo + q as f32 * ((hi - lo) / Q_MAX as f32)
+}
+
+/// Tile and quantise every key into one image. Padding pixels repeat the last Gaussian's value
+/// (smoother than zeros for the video coder); decoders ignore them.
+pub fn tile(f: &TimeFeatures, t: &Tiling, ranges: &[(f32, f32)]) -> Vec<Vec<u16>> {
+    (0..f.keys)
+        .map(|k| {
+            let mut img = vec![0u16; t.width() * t.height()];
+            for c in 0..t.tile_rows() * TILE_COLUMNS {
+                for i in 0..t.side * t.side {
+                    let v = if c < f.channels && f.n > 0 {
+                        quantise(f.at(i.min(f.n - 1), k)[c], ranges[c])
+                    } else {
+                        0
+                    };
+                    img[t.pixel(i, c)] = v;
+                }
+            }
+            img
+        })
+        .collect()
+}
+
+/// Inverse of [`tile`]: dequantised features from decoded images.
+pub fn untile(images: &[Vec<u16>], t: &Tiling, ranges: &[(f32, f32)]) -> TimeFeatures {
+    let mut f = TimeFeatures::zeros(t.n, t.keys, t.channels);
+    for (k, img) in images.iter().enumerate().take(t.keys) {
+        for i in 0..t.n {
+            let dst = f.at_mut(i, k);
+            for c in 0..t.channels {
+                dst[c] = dequantise(img[t.pixel(i, c)], ranges[c]);
+            }
+        }
+    }
+    f
+}
+
+/// Serialise a `TFEA` payload.
+pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
+    let mut b = Vec::new();
+    match body {
+        TfeaBody::Exact(f) => {
+            crate::model::dynamic::check_finite("time features", &f.data)?;
+            b.put_u8(0);
+            b.put_u8(0);
+            b.put_u16(f.channels as u16);
+            b.put_u32(f.n as u32);
+            b.put_u32(f.keys as u32);
+            b.put_u32(0);
+            let mut raw = Vec::with_capacity(f.data.len() * 4);
+            raw.put_f32s(&f.data);
+            let z = zstd::bulk::compress(&raw, zstd_level)
+                .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
+            b.extend_from_slice(&z);
+        }
+        TfeaBody::Hevc {
+            tiling,
+            ranges,
+            packets,
+        } => {
+            b.put_u8(1);
+            b.put_u8(12);
+            b.put_u16(tiling.channels as u16);
+            b.put_u32(tiling.n as u32);
+            b.put_u32(tiling.keys as u32);
+            b.put_u32(tiling.side as u32);
+            for &(lo, hi) in ranges {
+                if !lo.is_finite() || !hi.is_finite() {
+                    return Err(Error::new(
+                        ErrorKind::InvalidInput("time-feature range not finite".into()),
+                        0,
+                    ));
+                }
+                b.put_f32(lo);
+                b.put_f32(hi);
+            }
+            b.put_u32(packets.len() as u32);
+            for p in packets {
+                b.put_u32(p.len() as u32);
+                b.extend_from_slice(p);
+            }
+        }
+    }
+    Ok(b)
+}
+
+fn bad(reason: String, at: u64) -> Error {
+    Error::new(
+        ErrorKind::Payload {
+            chunk: ChunkType::TFEA,
+            reason,
+        },
+        at,
+    )
+}
+
+/// Parse a `TFEA` payload starting at absolute `offset`, checked against the scene and limits.
+/// HEVC packets are returned as they are; decode them with `dlgs-video` and [`untile`].
+pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<TfeaBody> {
+    let mut r = ByteReader::new(p, offset);
+    let at = r.offset();
+    let codec = r.u8("TFEA codec")?;
+    let depth = r.u8("TFEA bit depth")?;
+    let channels = r.u16("TFEA channels")? as usize;
+    let n = r.u32("TFEA n_dynamic")? as usize;
+    let keys = r.u32("TFEA keys")? as usize;
+    let side = r.u32("TFEA side")? as usize;
+    if channels != scene.time_channels as usize
+        || n != scene.n_dynamic as usize
+        || keys != scene.keys_per_gop() as usize
+    {
+        return Err(bad(
+            format!(
+                "shape ({n}, {keys}, {channels}) differs from HEAD ({}, {}, {})",
+                scene.n_dynamic,
+                scene.keys_per_gop(),
+                scene.time_channels
+            ),
+            at,
+        ));
+    }
+    // Bounded by HEAD, which the reader checked against the Gaussian limit: no overflow.
+    let floats = n as u64 * keys as u64 * channels as u64;
+    match (codec, depth) {
+        (0, 0) => {
+            let len = floats * 4;
+            if len > limits.max_alloc {
+                return Err(Error::new(
+                    ErrorKind::LimitExceeded {
+                        what: "TFEA features",
+                        value: len,
+                        limit: limits.max_alloc,
+                    },
+                    at,
+                ));
+            }
+            let body_at = r.offset();
+            let raw = zstd::bulk::decompress(r.rest(), len as usize)
+                .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), body_at))?;
+            if raw.len() as u64 != len {
+                return Err(Error::new(
+                    ErrorKind::Decompress(format!("{} bytes decompressed, {len} needed", raw.len())),
+                    body_at,
+                ));
+            }
+            let data = raw
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            Ok(TfeaBody::Exact(TimeFeatures {
+                n,
+                keys,
+                channels,
+                data,
+            }))
+        }
+        (1, 12) => {
+            let tiling = Tiling {
+                n,
+                keys,
+                channels,
+                side,
+            };
+            let ok = side > 0
+                && (side as u64) * (side as u64) >= n as u64
+                && tiling.width() <= 16384
+                && tiling.height() <= 16384;
+            if !ok {
+                return Err(Error::new(
+                    ErrorKind::InvalidField {
+                        field: "TFEA side",
+                        value: side as u64,
+                        reason: "side^2 must cover n_dynamic and images must fit 16384^2",
+                    },
+                    at + 12,
+                ));
+            }
+            let pixels = (tiling.width() * tiling.height()) as u64 * keys as u64 * 2;
+            if pixels > limits.max_alloc {
+                return Err(Error::new(
+                    ErrorKind::LimitExceeded {
+                        what: "TFEA decoded images",
+                        value: pixels,
+                        limit: limits.max_alloc,
+                    },
+                    at,
+                ));
+            }
+            let mut ranges = Vec::with_capacity(channels);
+            for _ in 0..channels {
+                let lo = r.finite_f32("TFEA range lo")?;
+                let hi = r.finite_f32("TFEA range hi")?;
+                ranges.push((lo, hi));
+            }
+            let at = r.offset();
+            let count = r.u32("TFEA packet count")? as usize;
+            // Every packet needs at least its 4-byte length: bounds the loop by the bytes present.
+            if count as u64 * 4 > r.remaining() as u64 {
+                return Err(r.err(ErrorKind::Truncated {
+                    what: "TFEA packets",
+                    needed: count as u64 * 4,
+                    available: r.remaining() as u64,
+                }));
+            }
+            let _ = at;
+            let mut packets = Vec::with_capacity(count);
+            for _ in 0..count {
+                let len = r.u32("TFEA packet length")? as usize;
+                packets.push(r.take(len, "TFEA packet")?.to_vec());
+            }
+            if r.remaining() != 0 {
+                return Err(bad(
+                    format!("{} bytes after the last packet", r.remaining()),
+                    r.offset(),
+                ));
+            }
+            Ok(TfeaBody::Hevc {
+                tiling,
+                ranges,
+                packets,
+            })
+        }
+        _ => Err(bad(format!("unknown codec {codec} / bit depth {depth}"), at)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn feats(n: usize) -> TimeFeatures {
+        let mut f = TimeFeatures::zeros(n, 7, 16);
+        for (j, v) in f.data.iter_mut().enumerate() {
+            *v = ((j as f32) * 0.37).sin() * 2.0;
+        }
+        f
+    }
+
+    #[test]
+    fn tiling_round_trip_is_within_half_a_step() {
+        for n in [1, 2, 7, 100, 101, 1000] {
+            let f = feats(n);
+            let t = Tiling::for_count(n, 7, 16);
+            assert!(t.side * t.side >= n && t.width() % 2 == 0 && t.height() % 2 == 0);
+            let r = ranges(&f, false);
+            let back = untile(&tile(&f, &t, &r), &t, &r);
+            for (a, b) in f.data.iter().zip(&back.data) {
+                assert!((a - b).abs() <= 4.0 / 4095.0 * 0.5 + 1e-6, "{a} {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn constant_channels_decode_exactly() {
+        let mut f = feats(10);
+        for i in 0..10 {
+            for k in 0..7 {
+                f.at_mut(i, k)[3] = 1.25;
+            }
+        }
+        let r = ranges(&f, false);
+        let t = Tiling::for_count(10, 7, 16);
+        let back = untile(&tile(&f, &t, &r), &t, &r);
+        assert!((0..10).all(|i| (0..7).all(|k| back.at(i, k)[3] == 1.25)));
+    }
+
+    #[test]
+    fn reference_pixel_layout() {
+        let t = Tiling {
+            n: 9,
+            keys: 1,
+            channels: 16,
+            side: 3,
+        };
+        // frame[(c//4)*side + i, (c%4)*side + j] = F[i*side + j, c]
+        assert_eq!(t.pixel(4, 5), (3 + 1) * 12 + (3 + 1));
+    }
+
+    #[test]
+    fn exact_payload_round_trip() {
+        let mut s = SceneHeader::still(0, 0);
+        s.n_dynamic = 5;
+        s.time_channels = 16;
+        s.gop_length = 60;
+        s.key_interval = 10;
+        s.frame_count = 60;
+        let f = feats(5);
+        let p = encode(&TfeaBody::Exact(f.clone()), 3).unwrap();
+        assert_eq!(
+            decode(&p, 0, &s, &Limits::tiny()).unwrap(),
+            TfeaBody::Exact(f)
+        );
+        let mut nan = feats(5);
+        nan.data[3] = f32::NAN;
+        assert!(encode(&TfeaBody::Exact(nan), 3).is_err());
+    }
+}

@@ -1,0 +1,307 @@
+//! `dlgs-video`: the only crate that talks to FFmpeg. It turns 12-bit gray images into raw HEVC
+//! packets (Main 12, 4:0:0, libx265) and back.
+//!
+//! Linking this crate links FFmpeg and libx265, which are GPL: binaries that include it are
+//! GPL-covered (see the README).
+
+use std::sync::Once;
+
+use ffmpeg_next as ff;
+use ff::format::Pixel;
+
+/// What went wrong inside FFmpeg, with FFmpeg's own message.
+#[derive(Debug, thiserror::Error)]
+pub enum VideoError {
+    #[error("FFmpeg has no {0} codec (install libavcodec with libx265 support)")]
+    MissingCodec(&'static str),
+    #[error("FFmpeg {stage}: {source}")]
+    Ffmpeg {
+        stage: &'static str,
+        source: ff::Error,
+    },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+fn ff_err(stage: &'static str) -> impl Fn(ff::Error) -> VideoError {
+    move |source| VideoError::Ffmpeg { stage, source }
+}
+
+/// x265 settings for one encode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HevcSettings {
+    /// Constant rate factor, 0..=51 (the reference uses 6).
+    pub crf: u8,
+    /// x265 preset name (ultrafast .. placebo).
+    pub preset: String,
+    /// Mathematically lossless coding of the 12-bit samples (crf is ignored).
+    pub lossless: bool,
+}
+
+impl Default for HevcSettings {
+    fn default() -> Self {
+        HevcSettings {
+            crf: 6,
+            preset: "medium".into(),
+            lossless: false,
+        }
+    }
+}
+
+pub const PRESETS: [&str; 10] = [
+    "ultrafast",
+    "superfast",
+    "veryfast",
+    "faster",
+    "fast",
+    "medium",
+    "slow",
+    "slower",
+    "veryslow",
+    "placebo",
+];
+
+/// A sequence of equally sized 12-bit gray images (values 0..=4095, row-major).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gray12 {
+    pub width: u32,
+    pub height: u32,
+    pub frames: Vec<Vec<u16>>,
+}
+
+fn init() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // Registration cannot fail in FFmpeg >= 4; codec chatter is silenced unless asked for.
+        let _ = ff::init();
+        let level = if std::env::var_os("DLGS_FFMPEG_LOG").is_some() {
+            ff::util::log::Level::Info
+        } else {
+            ff::util::log::Level::Quiet
+        };
+        ff::util::log::set_level(level);
+    });
+}
+
+/// Encode `video` as HEVC Main 12 monochrome; returns the packets in decode order, each a
+/// self-contained Annex B access unit (the first carries VPS/SPS/PPS).
+pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, VideoError> {
+    init();
+    let (w, h) = (video.width, video.height);
+    // HEVC with 4:0:0 needs even sizes only for chroma; x265 still wants multiples of 2.
+    if w == 0 || h == 0 || w % 2 != 0 || h % 2 != 0 || w > 16384 || h > 16384 {
+        return Err(VideoError::Invalid(format!(
+            "image size {w}x{h}: need even sides in 2..=16384"
+        )));
+    }
+    if s.crf > 51 || !PRESETS.contains(&s.preset.as_str()) {
+        return Err(VideoError::Invalid(format!(
+            "crf {} / preset {:?}: crf must be 0..=51 and preset one of {PRESETS:?}",
+            s.crf, s.preset
+        )));
+    }
+    let codec = ff::encoder::find_by_name("libx265").ok_or(VideoError::MissingCodec("libx265"))?;
+    let ctx = ff::codec::context::Context::new_with_codec(codec);
+    let mut enc = ctx.encoder().video().map_err(ff_err("encoder setup"))?;
+    enc.set_width(w);
+    enc.set_height(h);
+    enc.set_format(Pixel::GRAY12LE);
+    enc.set_time_base((1, 30));
+    enc.set_frame_rate(Some((30, 1)));
+    enc.set_color_range(ff::util::color::Range::JPEG);
+    let mut opts = ff::Dictionary::new();
+    opts.set("preset", &s.preset);
+    let mut params = String::from("log-level=none");
+    if s.lossless {
+        params.push_str(":lossless=1");
+    } else {
+        opts.set("crf", &s.crf.to_string());
+    }
+    opts.set("x265-params", &params);
+    let mut enc = enc.open_with(opts).map_err(ff_err("open libx265"))?;
+
+    let mut packets = Vec::new();
+    let mut frame = ff::frame::Video::new(Pixel::GRAY12LE, w, h);
+    for (i, img) in video.frames.iter().enumerate() {
+        if img.len() != (w * h) as usize {
+            return Err(VideoError::Invalid(format!(
+                "frame {i} has {} samples, expected {}",
+                img.len(),
+                w * h
+            )));
+        }
+        let stride = frame.stride(0);
+        let data = frame.data_mut(0);
+        for (y, row) in img.chunks_exact(w as usize).enumerate() {
+            let dst = &mut data[y * stride..y * stride + 2 * w as usize];
+            for (d, &v) in dst.chunks_exact_mut(2).zip(row) {
+                d.copy_from_slice(&v.min(4095).to_le_bytes());
+            }
+        }
+        frame.set_pts(Some(i as i64));
+        enc.send_frame(&frame).map_err(ff_err("encode"))?;
+        drain_packets(&mut enc, &mut packets)?;
+    }
+    enc.send_eof().map_err(ff_err("encode flush"))?;
+    drain_packets(&mut enc, &mut packets)?;
+    Ok(packets)
+}
+
+fn drain_packets(
+    enc: &mut ff::encoder::video::Encoder,
+    out: &mut Vec<Vec<u8>>,
+) -> Result<(), VideoError> {
+    let mut pkt = ff::Packet::empty();
+    loop {
+        match enc.receive_packet(&mut pkt) {
+            Ok(()) => out.push(pkt.data().unwrap_or(&[]).to_vec()),
+            Err(ff::Error::Other { errno }) if errno == ff::util::error::EAGAIN => return Ok(()),
+            Err(ff::Error::Eof) => return Ok(()),
+            Err(e) => return Err(ff_err("encode")(e)),
+        }
+    }
+}
+
+/// Decode packets produced by [`encode_gray12`] (or any HEVC Main 12 4:0:0 stream) into
+/// `expect_frames` images of `width` x `height`. Anything else is an error, never a panic.
+pub fn decode_gray12(
+    packets: &[&[u8]],
+    width: u32,
+    height: u32,
+    expect_frames: usize,
+) -> Result<Gray12, VideoError> {
+    init();
+    let codec = ff::decoder::find(ff::codec::Id::HEVC).ok_or(VideoError::MissingCodec("HEVC"))?;
+    let ctx = ff::codec::context::Context::new_with_codec(codec);
+    let mut dec = ctx.decoder().video().map_err(ff_err("decoder setup"))?;
+    let mut out = Gray12 {
+        width,
+        height,
+        frames: Vec::with_capacity(expect_frames.min(4096)),
+    };
+    for p in packets {
+        if p.is_empty() {
+            continue;
+        }
+        let pkt = ff::Packet::copy(p);
+        dec.send_packet(&pkt).map_err(ff_err("decode"))?;
+        drain_frames(&mut dec, &mut out, expect_frames)?;
+    }
+    dec.send_eof().map_err(ff_err("decode flush"))?;
+    drain_frames(&mut dec, &mut out, expect_frames)?;
+    if out.frames.len() != expect_frames {
+        return Err(VideoError::Invalid(format!(
+            "HEVC stream gave {} frames, expected {expect_frames}",
+            out.frames.len()
+        )));
+    }
+    Ok(out)
+}
+
+fn drain_frames(
+    dec: &mut ff::decoder::Video,
+    out: &mut Gray12,
+    max_frames: usize,
+) -> Result<(), VideoError> {
+    let mut frame = ff::frame::Video::empty();
+    loop {
+        match dec.receive_frame(&mut frame) {
+            Ok(()) => {
+                if frame.format() != Pixel::GRAY12LE
+                    || frame.width() != out.width
+                    || frame.height() != out.height
+                {
+                    return Err(VideoError::Invalid(format!(
+                        "HEVC frame is {:?} {}x{}, expected GRAY12LE {}x{}",
+                        frame.format(),
+                        frame.width(),
+                        frame.height(),
+                        out.width,
+                        out.height
+                    )));
+                }
+                if out.frames.len() >= max_frames {
+                    return Err(VideoError::Invalid(format!(
+                        "HEVC stream has more than {max_frames} frames"
+                    )));
+                }
+                let (w, h) = (out.width as usize, out.height as usize);
+                let stride = frame.stride(0);
+                let data = frame.data(0);
+                let mut img = Vec::with_capacity(w * h);
+                for y in 0..h {
+                    let row = &data[y * stride..y * stride + 2 * w];
+                    img.extend(
+                        row.chunks_exact(2)
+                            .map(|b| u16::from_le_bytes([b[0], b[1]]).min(4095)),
+                    );
+                }
+                out.frames.push(img);
+            }
+            Err(ff::Error::Other { errno }) if errno == ff::util::error::EAGAIN => return Ok(()),
+            Err(ff::Error::Eof) => return Ok(()),
+            Err(e) => return Err(ff_err("decode")(e)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: u32, h: u32, n: usize) -> Gray12 {
+        let frames = (0..n)
+            .map(|k| {
+                (0..w * h)
+                    .map(|i| {
+                        let (x, y) = (i % w, i / w);
+                        ((x * 13 + y * 7 + k as u32 * 50) % 4096) as u16
+                    })
+                    .collect()
+            })
+            .collect();
+        Gray12 {
+            width: w,
+            height: h,
+            frames,
+        }
+    }
+
+    #[test]
+    fn lossless_round_trip_is_exact() {
+        let v = ramp(64, 48, 7);
+        let s = HevcSettings {
+            lossless: true,
+            preset: "ultrafast".into(),
+            ..Default::default()
+        };
+        let pk = encode_gray12(&v, &s).unwrap();
+        let refs: Vec<&[u8]> = pk.iter().map(|p| p.as_slice()).collect();
+        let d = decode_gray12(&refs, 64, 48, 7).unwrap();
+        assert_eq!(d, v);
+    }
+
+    #[test]
+    fn lossy_round_trip_is_close() {
+        let v = ramp(64, 64, 7);
+        let pk = encode_gray12(&v, &HevcSettings::default()).unwrap();
+        let refs: Vec<&[u8]> = pk.iter().map(|p| p.as_slice()).collect();
+        let d = decode_gray12(&refs, 64, 64, 7).unwrap();
+        let max = v
+            .frames
+            .iter()
+            .flatten()
+            .zip(d.frames.iter().flatten())
+            .map(|(a, b)| (*a as i32 - *b as i32).abs())
+            .max()
+            .unwrap();
+        assert!(max < 400, "max error {max}");
+    }
+
+    #[test]
+    fn garbage_is_an_error_not_a_crash() {
+        let junk: Vec<u8> = (0..5000u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect();
+        assert!(decode_gray12(&[&junk], 64, 64, 7).is_err());
+        assert!(decode_gray12(&[], 64, 64, 7).is_err());
+    }
+}
