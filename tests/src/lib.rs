@@ -1,6 +1,7 @@
 //! Shared helpers for the integration tests: paths to the real data in `../shared/data`,
 //! small real scenes, and an independent reference renderer.
 
+pub mod reference_deform;
 pub mod reference_render;
 pub mod vectors;
 
