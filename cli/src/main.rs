@@ -1,6 +1,7 @@
 //! `dlgs`: encode, inspect, decode and render `.dlgs` streams.
 
 mod cameras_arg;
+mod encode_cmd;
 mod info;
 mod scene_io;
 
@@ -8,8 +9,6 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use dlgs::payload::raw_canonical::RawCodec;
-use dlgs_encoder::EncoderConfig;
 use dlgs_render::{image_out, metrics, render, RenderOptions};
 
 use cameras_arg::{cameras_to_json, CameraArgs};
@@ -36,18 +35,19 @@ enum Cmd {
     },
     /// Read every chunk of a .dlgs file and check every CRC and index entry.
     Verify { file: PathBuf },
-    /// Encode a splat scene (PLY, .splat, SPZ) into a single-frame .dlgs.
+    /// Encode a splat scene (PLY, .splat, SPZ) into a single-frame .dlgs, or re-encode a
+    /// .dlgs stream (e.g. a lossless `dlgs synth` model) with other settings.
     Encode {
         input: PathBuf,
         #[arg(short, long)]
         output: PathBuf,
-        /// Store raw floats without zstd.
-        #[arg(long)]
-        no_zstd: bool,
-        /// zstd level for raw canonical chunks.
-        #[arg(long, default_value_t = 9)]
-        zstd_level: i32,
+        #[command(flatten)]
+        codec: encode_cmd::CodecArgs,
     },
+    /// Build a SYNTHETIC dynamic model from a real scene (no trained DLGStream model is
+    /// available here): a compact subset moves, driven by smooth time features and random
+    /// calibrated decoders.
+    Synth(encode_cmd::SynthArgs),
     /// Decode the Gaussians shown at time t into an INRIA PLY (with language extras if present).
     Decode {
         file: PathBuf,
@@ -130,39 +130,17 @@ fn main() -> Result<()> {
         Cmd::Encode {
             input,
             output,
-            no_zstd,
-            zstd_level,
-        } => {
-            let g = dlgs::interop::read_splat_file(&input)
-                .with_context(|| format!("reading {}", input.display()))?;
-            let cfg = EncoderConfig {
-                raw_codec: if no_zstd {
-                    RawCodec::None
-                } else {
-                    RawCodec::Zstd
-                },
-                zstd_level,
-                meta: Some(
-                    serde_json::json!({ "source": input.file_name().map(|s| s.to_string_lossy().to_string()), "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")) }),
-                ),
-            };
-            let f = std::fs::File::create(&output)
-                .with_context(|| format!("creating {}", output.display()))?;
-            dlgs_encoder::encode_still(&g, cfg, std::io::BufWriter::new(f))?;
-            let size = std::fs::metadata(&output)?.len();
-            let in_size = std::fs::metadata(&input)?.len();
-            println!(
-                "{} Gaussians (SH {}) -> {} ({size} bytes, {:.1}% of input, {:.2} bits/Gaussian)",
-                g.len(),
-                g.sh_degree,
-                output.display(),
-                100.0 * size as f64 / in_size as f64,
-                size as f64 * 8.0 / g.len().max(1) as f64
-            );
-            Ok(())
-        }
+            codec,
+        } => encode_cmd::run_encode(&input, &output, &codec),
+        Cmd::Synth(args) => encode_cmd::run_synth(&args),
         Cmd::Decode { file, t, output } => {
-            let g = scene_io::load_gaussians(&file, t)?;
+            let mut src = scene_io::Source::open(&file)?;
+            // View-dependent decoders need a viewpoint: the default orbit's first camera.
+            let canon = src.canonical(t)?;
+            let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
+                .first()
+                .map_or([0.0; 3], |c| c.position.to_array());
+            let g = src.at(t, eye, canon.has_language())?;
             std::fs::write(&output, dlgs::interop::ply::write_ply(&g)?)
                 .with_context(|| format!("writing {}", output.display()))?;
             println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
@@ -176,13 +154,14 @@ fn main() -> Result<()> {
             background,
             output,
         } => {
-            let g = scene_io::load_gaussians(&scene, t)?;
-            let cameras = cams.resolve(&g)?;
+            let mut src = scene_io::Source::open(&scene)?;
+            let cameras = cams.resolve(&src.canonical(t)?)?;
             let opts = RenderOptions {
                 background: parse_rgb(&background)?,
                 features,
             };
             for (i, cam) in cameras.iter().enumerate() {
+                let g = src.at(t, cam.position.to_array(), features)?;
                 let img = render(&g, cam, &opts).map_err(anyhow::Error::msg)?;
                 let out = numbered(&output, i, cameras.len());
                 image_out::save_rgb_png(&out, &img.color, img.width, img.height)
@@ -218,9 +197,9 @@ fn main() -> Result<()> {
             error_dir,
             json,
         } => {
-            let ga = scene_io::load_gaussians(&a, t)?;
-            let gb = scene_io::load_gaussians(&b, t)?;
-            let cameras = cams.resolve(&ga)?;
+            let mut sa = scene_io::Source::open(&a)?;
+            let mut sb = scene_io::Source::open(&b)?;
+            let cameras = cams.resolve(&sa.canonical(t)?)?;
             let opts = RenderOptions {
                 background: parse_rgb(&background)?,
                 features: false,
@@ -230,6 +209,8 @@ fn main() -> Result<()> {
             }
             let mut rows = Vec::new();
             for (i, cam) in cameras.iter().enumerate() {
+                let ga = sa.at(t, cam.position.to_array(), false)?;
+                let gb = sb.at(t, cam.position.to_array(), false)?;
                 let ia = render(&ga, cam, &opts).map_err(anyhow::Error::msg)?;
                 let ib = render(&gb, cam, &opts).map_err(anyhow::Error::msg)?;
                 let p = metrics::psnr(&ia.color, &ib.color);
@@ -275,7 +256,7 @@ fn main() -> Result<()> {
             cams,
             output,
         } => {
-            let g = scene_io::load_gaussians(&scene, 0.0)?;
+            let g = scene_io::Source::open(&scene)?.canonical(0.0)?;
             let cameras = cams.resolve(&g)?;
             std::fs::write(&output, cameras_to_json(&cameras))?;
             println!("{} cameras -> {}", cameras.len(), output.display());

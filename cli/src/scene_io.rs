@@ -1,26 +1,71 @@
-//! Loading a renderable set of Gaussians from any supported file.
+//! Loading renderable Gaussians from any supported file: a `.dlgs` stream at time t (with the
+//! view-dependent decoders evaluated for a given camera) or a PLY / .splat / SPZ scene.
 
+use std::fs::File;
+use std::io::BufReader;
 use std::path::Path;
 
 use anyhow::{Context, Result};
 use dlgs::Gaussians;
-use dlgs_decoder::Decoder;
+use dlgs_decoder::{Decoder, FrameOptions};
 
 pub fn is_dlgs(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("dlgs"))
 }
 
-/// Gaussians to render: a `.dlgs` frame at time `t`, or a PLY / .splat / SPZ scene.
-pub fn load_gaussians(path: &Path, t: f64) -> Result<Gaussians> {
-    if is_dlgs(path) {
-        let mut dec =
-            Decoder::open_path(path).with_context(|| format!("opening {}", path.display()))?;
-        let frame = dec
-            .frame_at(t)
-            .with_context(|| format!("decoding {} at t = {t} s", path.display()))?;
-        Ok(frame.merged())
-    } else {
-        dlgs::interop::read_splat_file(path).with_context(|| format!("reading {}", path.display()))
+/// A scene file opened once and asked for Gaussians per time and camera.
+pub enum Source {
+    Dlgs(Box<Decoder<BufReader<File>>>, String),
+    Splat(Gaussians),
+}
+
+impl Source {
+    pub fn open(path: &Path) -> Result<Self> {
+        if is_dlgs(path) {
+            let dec =
+                Decoder::open_path(path).with_context(|| format!("opening {}", path.display()))?;
+            Ok(Source::Dlgs(Box::new(dec), path.display().to_string()))
+        } else {
+            let g = dlgs::interop::read_splat_file(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok(Source::Splat(g))
+        }
+    }
+
+    /// The undeformed Gaussians of the GOP shown at `t` (for camera placement).
+    pub fn canonical(&mut self, t: f64) -> Result<Gaussians> {
+        match self {
+            Source::Splat(g) => Ok(g.clone()),
+            Source::Dlgs(dec, name) => {
+                let tp = dec
+                    .scene()
+                    .locate(t)
+                    .with_context(|| format!("{name} at t = {t} s"))?;
+                Ok(dec
+                    .gop_canonical(tp.gop)
+                    .with_context(|| format!("decoding GOP {} of {name}", tp.gop))?
+                    .merged())
+            }
+        }
+    }
+
+    /// The Gaussians at `t` seen from `camera_center` (view-dependent dynamic decoders).
+    pub fn at(&mut self, t: f64, camera_center: [f32; 3], language: bool) -> Result<Gaussians> {
+        match self {
+            Source::Splat(g) => Ok(g.clone()),
+            Source::Dlgs(dec, name) => {
+                let f = dec
+                    .frame_at(
+                        t,
+                        &FrameOptions {
+                            camera_center,
+                            language,
+                        },
+                    )
+                    .with_context(|| format!("decoding {name} at t = {t} s"))?;
+                Ok(f.merged())
+            }
+        }
     }
 }

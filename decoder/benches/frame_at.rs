@@ -39,7 +39,10 @@ fn bench(c: &mut Criterion) {
         pool.install(|| dec.gop(0).unwrap());
         let macs = model.gops[0].mlps.per_frame_macs(false) as f64;
         let macs_lang = model.gops[0].mlps.per_frame_macs(true) as f64;
-        for (label, language, macs) in [("colour", false, macs), ("colour+language", true, macs_lang)] {
+        for (label, language, macs) in [
+            ("colour", false, macs),
+            ("colour+language", true, macs_lang),
+        ] {
             let o = FrameOptions {
                 camera_center: [0.0, 0.0, -3.0],
                 language,

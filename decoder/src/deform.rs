@@ -1,5 +1,5 @@
 //! Turn a GOP's canonical dynamic Gaussians plus its deformation field into the Gaussians of
-//! one instant (format-spec §7). Geometry that depends only on a key is computed once per GOP;
+//! one instant (format-spec §6.4). Geometry that depends only on a key is computed once per GOP;
 //! per frame only the Hermite/slerp blend and the view-dependent appearance (and language, if
 //! asked) are evaluated, as GEMMs over fixed blocks of rows so the result never depends on the
 //! thread count.
@@ -24,7 +24,7 @@ pub struct FrameOptions {
     pub language: bool,
 }
 
-/// Per-key geometry of the reference model (§7.2), `[i * keys + k]`.
+/// Per-key geometry of the reference model (§6.4), `[i * keys + k]`.
 struct KeyGeometry {
     pos: Vec<[f32; 3]>,
     tangent: Vec<[f32; 3]>,
@@ -54,7 +54,13 @@ fn blocks(n: usize) -> impl IndexedParallelIterator<Item = std::ops::Range<usize
 }
 
 /// Rows `F[i, k, c0..c0+w]` of a block, as a matrix.
-fn key_rows(f: &TimeFeatures, rows: std::ops::Range<usize>, k: usize, c0: usize, w: usize) -> Array2<f32> {
+fn key_rows(
+    f: &TimeFeatures,
+    rows: std::ops::Range<usize>,
+    k: usize,
+    c0: usize,
+    w: usize,
+) -> Array2<f32> {
     let mut x = Array2::zeros((rows.len(), w));
     for (r, i) in rows.enumerate() {
         x.row_mut(r)
@@ -76,15 +82,18 @@ fn lerp_rows(
     w: usize,
     extra: usize,
 ) -> Array2<f32> {
-    let mut x = Array2::zeros((rows.len(), w + extra));
-    for (r, i) in rows.enumerate() {
-        let (a, b) = (&f.at(i, k)[c0..c0 + w], &f.at(i, k + 1)[c0..c0 + w]);
-        let dst = x.row_mut(r).into_slice().expect("standard layout");
-        for c in 0..w {
-            dst[c] = lerp(a[c], b[c], d);
+    let cols = w + extra;
+    let mut buf = vec![0f32; rows.len() * cols];
+    let (keys, ch) = (f.keys, f.channels);
+    for (dst, i) in buf.chunks_exact_mut(cols).zip(rows) {
+        let a0 = (i * keys + k) * ch + c0;
+        let a = &f.data[a0..a0 + w];
+        let b = &f.data[a0 + ch..a0 + ch + w];
+        for ((d_, &x), &y) in dst[..w].iter_mut().zip(a).zip(b) {
+            *d_ = lerp(x, y, d);
         }
     }
-    x
+    Array2::from_shape_vec((buf.len() / cols, cols), buf).expect("sized above")
 }
 
 impl Deformer {
@@ -132,7 +141,8 @@ impl Deformer {
                         g.pos[j] = [p[0] + o[0], p[1] + o[1], p[2] + o[2]];
                         g.tangent[j] = [o[3], o[4], o[5]];
                         let q = canon.rotations[i];
-                        g.quat[j] = normalize4([q[0] + c[3], q[1] + c[4], q[2] + c[5], q[3] + c[6]]);
+                        g.quat[j] =
+                            normalize4([q[0] + c[3], q[1] + c[4], q[2] + c[5], q[3] + c[6]]);
                         if let Some(ds) = &mut g.dscale {
                             ds[j] = [c[0], c[1], c[2]];
                         }
@@ -159,7 +169,13 @@ impl Deformer {
     }
 
     /// The dynamic Gaussians at key pair (`key`, `key + 1`) and fraction `delta`.
-    pub fn frame(&self, canon: &Gaussians, key: usize, delta: f32, opts: &FrameOptions) -> Gaussians {
+    pub fn frame(
+        &self,
+        canon: &Gaussians,
+        key: usize,
+        delta: f32,
+        opts: &FrameOptions,
+    ) -> Gaussians {
         let language = opts.language && self.lang.is_some() && canon.has_language();
         let parts: Vec<Gaussians> = blocks(self.features.n)
             .map(|rows| self.frame_block(canon, rows, key, delta, opts.camera_center, language))
@@ -193,9 +209,15 @@ impl Deformer {
                 let keys = f.keys;
                 for i in rows.clone() {
                     let (a, b) = (i * keys + k, i * keys + k + 1);
-                    g.positions
-                        .push(hermite(geo.pos[a], geo.tangent[a], geo.pos[b], geo.tangent[b], d));
-                    g.rotations.push(slerp_reference(geo.quat[a], geo.quat[b], d));
+                    g.positions.push(hermite(
+                        geo.pos[a],
+                        geo.tangent[a],
+                        geo.pos[b],
+                        geo.tangent[b],
+                        d,
+                    ));
+                    g.rotations
+                        .push(slerp_reference(geo.quat[a], geo.quat[b], d));
                     let s = canon.log_scales[i];
                     g.log_scales.push(match &geo.dscale {
                         // Key `k` only, no interpolation (the reference's eval path).
@@ -214,8 +236,12 @@ impl Deformer {
                     let p = canon.positions[i];
                     g.positions.push([p[0] + o[0], p[1] + o[1], p[2] + o[2]]);
                     let q = canon.rotations[i];
-                    g.rotations
-                        .push(normalize4([q[0] + c[3], q[1] + c[4], q[2] + c[5], q[3] + c[6]]));
+                    g.rotations.push(normalize4([
+                        q[0] + c[3],
+                        q[1] + c[4],
+                        q[2] + c[5],
+                        q[3] + c[6],
+                    ]));
                     let s = canon.log_scales[i];
                     g.log_scales.push(if self.scale_offsets {
                         [s[0] + c[0], s[1] + c[1], s[2] + c[2]]

@@ -1,4 +1,4 @@
-//! The reference implementation's interpolators (format-spec §7.2), reproduced exactly,
+//! The reference implementation's interpolators (format-spec §6.4), reproduced exactly,
 //! including its guards.
 
 /// `F.normalize(q, eps=1e-12)`: a zero quaternion stays zero.

@@ -1,5 +1,5 @@
 //! `dlgs-decoder`: random-access decoding of `.dlgs` streams, including the dynamic
-//! Gaussians at any time t (format-spec §7).
+//! Gaussians at any time t (format-spec §6.4).
 
 pub mod deform;
 pub mod interp;

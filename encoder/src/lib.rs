@@ -106,16 +106,26 @@ impl<W: Write> StreamEncoder<W> {
         let dyn_chunks = match (s.n_dynamic > 0, dynamic) {
             (false, None) => None,
             (true, Some(d)) => Some(self.dynamic_payloads(d)?),
-            (true, None) => return Err(invalid("the scene has dynamic Gaussians but the GOP has no deformation field".into())),
-            (false, Some(_)) => return Err(invalid("a deformation field for a scene without dynamic Gaussians".into())),
+            (true, None) => {
+                return Err(invalid(
+                    "the scene has dynamic Gaussians but the GOP has no deformation field".into(),
+                ))
+            }
+            (false, Some(_)) => {
+                return Err(invalid(
+                    "a deformation field for a scene without dynamic Gaussians".into(),
+                ))
+            }
         };
         let payload = raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?;
         self.writer.begin_gop()?;
         self.writer
             .gop_chunk(ChunkType::CRAW, FLAG_MUST_UNDERSTAND, &payload)?;
         if let Some((tfea, mlpw)) = dyn_chunks {
-            self.writer.gop_chunk(ChunkType::TFEA, FLAG_MUST_UNDERSTAND, &tfea)?;
-            self.writer.gop_chunk(ChunkType::MLPW, FLAG_MUST_UNDERSTAND, &mlpw)?;
+            self.writer
+                .gop_chunk(ChunkType::TFEA, FLAG_MUST_UNDERSTAND, &tfea)?;
+            self.writer
+                .gop_chunk(ChunkType::MLPW, FLAG_MUST_UNDERSTAND, &mlpw)?;
         }
         Ok(())
     }

@@ -8,7 +8,9 @@
 
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::SceneHeader;
-use dlgs::model::{Canonical, DeformMlps, DynamicGop, Gaussians, Layer, Mlp, MlpRole, TimeFeatures};
+use dlgs::model::{
+    Canonical, DeformMlps, DynamicGop, Gaussians, Layer, Mlp, MlpRole, TimeFeatures,
+};
 use dlgs::{Error, ErrorKind, Result};
 
 /// What to generate.
@@ -159,8 +161,15 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
     if !(spec.dynamic_fraction > 0.0 && spec.dynamic_fraction < 1.0) {
         return Err(bad("dynamic fraction must be in (0, 1)".into()));
     }
-    if spec.gops == 0 || spec.gop_length == 0 || spec.key_interval == 0 || spec.gop_length % spec.key_interval != 0 || spec.fps == 0 {
-        return Err(bad("GOP length must be a positive multiple of the key interval".into()));
+    if spec.gops == 0
+        || spec.gop_length == 0
+        || spec.key_interval == 0
+        || !spec.gop_length.is_multiple_of(spec.key_interval)
+        || spec.fps == 0
+    {
+        return Err(bad(
+            "GOP length must be a positive multiple of the key interval".into(),
+        ));
     }
     let mut g = if spec.language && !scene_g.has_language() {
         synthetic_language(scene_g)
@@ -171,11 +180,15 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
         g = g.without_language();
     }
     let n = g.len();
-    let centre: [f32; 3] = std::array::from_fn(|a| median(g.positions.iter().map(|p| p[a]).collect()));
+    let centre: [f32; 3] =
+        std::array::from_fn(|a| median(g.positions.iter().map(|p| p[a]).collect()));
     let dist: Vec<f32> = g
         .positions
         .iter()
-        .map(|p| ((p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2) + (p[2] - centre[2]).powi(2)).sqrt())
+        .map(|p| {
+            ((p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2) + (p[2] - centre[2]).powi(2))
+                .sqrt()
+        })
         .collect();
     // Scene size: the 90th-percentile distance from the median centre (robust to floaters).
     let mut sorted = dist.clone();
@@ -239,7 +252,11 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
         .map(|_| {
             let v: [f32; 3] = std::array::from_fn(|_| rng.f32() * 2.0 - 1.0);
             let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-3);
-            ([v[0] / l, v[1] / l, v[2] / l], 0.2 + rng.f32() * 0.6, 0.5 + rng.f32() * 1.5)
+            (
+                [v[0] / l, v[1] / l, v[2] / l],
+                0.2 + rng.f32() * 0.6,
+                0.5 + rng.f32() * 1.5,
+            )
         })
         .collect();
     let features_at = |gop: u32| {
@@ -247,10 +264,14 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
         for i in 0..n_dyn {
             let p = dynamics.positions[i];
             for k in 0..keys {
-                let tau = (gop * spec.gop_length + k as u32 * spec.key_interval) as f32 / spec.fps as f32;
+                let tau =
+                    (gop * spec.gop_length + k as u32 * spec.key_interval) as f32 / spec.fps as f32;
                 let dst = f.at_mut(i, k);
                 for (c, (dir, hz, waves)) in chan.iter().enumerate() {
-                    let s = ((p[0] - centre[0]) * dir[0] + (p[1] - centre[1]) * dir[1] + (p[2] - centre[2]) * dir[2]) / size;
+                    let s = ((p[0] - centre[0]) * dir[0]
+                        + (p[1] - centre[1]) * dir[1]
+                        + (p[2] - centre[2]) * dir[2])
+                        / size;
                     dst[c] = (std::f32::consts::TAU * (hz * tau + waves * s)).sin();
                 }
             }
@@ -285,8 +306,16 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
         let mut deform = random_mlp(&mut rng, MlpRole::Deform, 6);
         calibrate(&mut deform, &geo_x, &[m, m, m, m, m, m]);
         let mut cov = random_mlp(&mut rng, MlpRole::Cov, 7);
-        calibrate(&mut cov, &geo_x, &[0.05, 0.05, 0.05, 0.05, 0.05, 0.05, 0.05]);
-        let mut opacity = random_mlp(&mut rng, MlpRole::Opacity, if g.has_language() { 2 } else { 1 });
+        calibrate(
+            &mut cov,
+            &geo_x,
+            &[0.05, 0.05, 0.05, 0.05, 0.05, 0.05, 0.05],
+        );
+        let mut opacity = random_mlp(
+            &mut rng,
+            MlpRole::Opacity,
+            if g.has_language() { 2 } else { 1 },
+        );
         calibrate(&mut opacity, &app_x, &[0.3, 0.3]);
         let mut color = random_mlp(&mut rng, MlpRole::Color, 3 * coeffs);
         calibrate(&mut color, &app_x, &vec![0.08; 3 * coeffs]);
@@ -316,7 +345,11 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
 }
 
 /// Write a generated model with the given encoder settings.
-pub fn write_model<W: std::io::Write>(model: &SynthModel, cfg: crate::EncoderConfig, out: W) -> Result<W> {
+pub fn write_model<W: std::io::Write>(
+    model: &SynthModel,
+    cfg: crate::EncoderConfig,
+    out: W,
+) -> Result<W> {
     let mut enc = crate::StreamEncoder::new(out, model.scene.clone(), cfg)?;
     for d in &model.gops {
         enc.push_gop(&model.canonical, Some(d))?;

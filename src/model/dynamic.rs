@@ -1,5 +1,5 @@
 //! The deformation field of one GOP: key time features and the bias-free MLP decoders
-//! (format-spec/dlgs.md §6.2–§6.4, formulas in §7).
+//! (format-spec/dlgs.md §6.2–§6.4, formulas in §6.4).
 
 use crate::container::SceneHeader;
 use crate::error::{Error, ErrorKind, Result};
@@ -44,7 +44,7 @@ impl TimeFeatures {
     }
 }
 
-/// Which decoder an MLP is; fixes its input routing and how its output is applied (§7).
+/// Which decoder an MLP is; fixes its input routing and how its output is applied (§6.4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum MlpRole {
     /// `F[0:12]` of one key -> `[Δxyz(3), tangent(3)]`.
@@ -178,7 +178,10 @@ impl DeformMlps {
             }
             for w in m.layers.windows(2) {
                 if w[0].outputs != w[1].inputs {
-                    return Err(bad(format!("{} MLP layer widths do not chain", m.role.name())));
+                    return Err(bad(format!(
+                        "{} MLP layer widths do not chain",
+                        m.role.name()
+                    )));
                 }
             }
             for l in &m.layers {
@@ -246,7 +249,7 @@ pub fn check_finite(what: &str, v: &[f32]) -> Result<()> {
     Ok(())
 }
 
-/// Where time `t` falls: GOP, key pair and the fraction between the two keys (§4.3, §7.1).
+/// Where time `t` falls: GOP, key pair and the fraction between the two keys (§4.3, §6.4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimePoint {
     pub gop: u32,

@@ -35,7 +35,11 @@ pub fn encode(m: &DeformMlps, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>
     let mlps: Vec<&Mlp> = m.iter().collect();
     let mut b = Vec::new();
     b.put_u8(ty as u8);
-    b.put_u8(if m.scale_offsets { FLAG_SCALE_OFFSETS } else { 0 });
+    b.put_u8(if m.scale_offsets {
+        FLAG_SCALE_OFFSETS
+    } else {
+        0
+    });
     b.put_u8(mlps.len() as u8);
     b.put_u8(0);
     let mut raw = Vec::new();
@@ -122,7 +126,10 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         for _ in 0..=layers {
             let w = r.u16("MLPW width")? as usize;
             if w == 0 || w > MAX_WIDTH {
-                return Err(bad(format!("layer width {w} (1..={MAX_WIDTH})"), r.offset() - 2));
+                return Err(bad(
+                    format!("layer width {w} (1..={MAX_WIDTH})"),
+                    r.offset() - 2,
+                ));
             }
             widths.push(w);
         }
@@ -133,7 +140,10 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let raw_len = r.u32("MLPW weight bytes")? as u64;
     if raw_len != total * ty.size() as u64 {
         return Err(bad(
-            format!("{raw_len} weight bytes declared, shapes need {}", total * ty.size() as u64),
+            format!(
+                "{raw_len} weight bytes declared, shapes need {}",
+                total * ty.size() as u64
+            ),
             raw_at,
         ));
     }

@@ -39,12 +39,15 @@ pub struct Tiling {
 }
 
 impl Tiling {
-    /// The smallest tiling for `n` Gaussians whose image sides are even (x265 needs that).
+    /// The smallest tiling for `n` Gaussians whose image sides are even and at least 64
+    /// (libx265 refuses smaller pictures).
     pub fn for_count(n: usize, keys: usize, channels: usize) -> Self {
         let mut side = (n as f64).sqrt().ceil() as usize;
         while side * side < n {
             side += 1;
         }
+        let min_side = 64usize.div_ceil(TILE_COLUMNS.min(channels.div_ceil(TILE_COLUMNS)).max(1));
+        side = side.max(min_side);
         let mut t = Tiling {
             n,
             keys,
@@ -257,7 +260,10 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), body_at))?;
             if raw.len() as u64 != len {
                 return Err(Error::new(
-                    ErrorKind::Decompress(format!("{} bytes decompressed, {len} needed", raw.len())),
+                    ErrorKind::Decompress(format!(
+                        "{} bytes decompressed, {len} needed",
+                        raw.len()
+                    )),
                     body_at,
                 ));
             }
@@ -338,7 +344,10 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 packets,
             })
         }
-        _ => Err(bad(format!("unknown codec {codec} / bit depth {depth}"), at)),
+        _ => Err(bad(
+            format!("unknown codec {codec} / bit depth {depth}"),
+            at,
+        )),
     }
 }
 
@@ -359,7 +368,7 @@ mod tests {
         for n in [1, 2, 7, 100, 101, 1000] {
             let f = feats(n);
             let t = Tiling::for_count(n, 7, 16);
-            assert!(t.side * t.side >= n && t.width() % 2 == 0 && t.height() % 2 == 0);
+            assert!(t.side * t.side >= n && t.width() & 1 == 0 && t.height() & 1 == 0);
             let r = ranges(&f, false);
             let back = untile(&tile(&f, &t, &r), &t, &r);
             for (a, b) in f.data.iter().zip(&back.data) {

@@ -8,7 +8,11 @@ fn mlp(m: &Mlp, x: &[f64]) -> Vec<f64> {
     let mut h = x.to_vec();
     for (li, l) in m.layers.iter().enumerate() {
         let mut o: Vec<f64> = (0..l.outputs)
-            .map(|r| (0..l.inputs).map(|c| l.weights[r * l.inputs + c] as f64 * h[c]).sum())
+            .map(|r| {
+                (0..l.inputs)
+                    .map(|c| l.weights[r * l.inputs + c] as f64 * h[c])
+                    .sum()
+            })
             .collect();
         if li + 1 < m.layers.len() {
             o.iter_mut().for_each(|v| *v = v.max(0.0));
@@ -45,16 +49,25 @@ pub fn deform_reference(
         let (ok, ok1) = (mlp(&m.deform, &fk[..12]), mlp(&m.deform, &fk1[..12]));
         let (ck, ck1) = (mlp(&m.cov, &fk[..12]), mlp(&m.cov, &fk1[..12]));
         let (d2, d3) = (d * d, d * d * d);
-        let h = [2.0 * d3 - 3.0 * d2 + 1.0, d3 - 2.0 * d2 + d, -2.0 * d3 + 3.0 * d2, d3 - d2];
+        let h = [
+            2.0 * d3 - 3.0 * d2 + 1.0,
+            d3 - 2.0 * d2 + d,
+            -2.0 * d3 + 3.0 * d2,
+            d3 - d2,
+        ];
         for a in 0..3 {
             let pk = p[a] + ok[a];
             let pk1 = p[a] + ok1[a];
-            out.positions[i][a] = (h[0] * pk + h[1] * ok[3 + a] + h[2] * pk1 + h[3] * ok1[3 + a]) as f32;
+            out.positions[i][a] =
+                (h[0] * pk + h[1] * ok[3 + a] + h[2] * pk1 + h[3] * ok1[3 + a]) as f32;
         }
         let q: [f64; 4] = canon.rotations[i].map(|v| v as f64);
         let qk = norm(std::array::from_fn(|a| q[a] + ck[3 + a]));
         let qk1 = norm(std::array::from_fn(|a| q[a] + ck1[3 + a]));
-        let dot = (0..4).map(|a| qk[a] * qk1[a]).sum::<f64>().clamp(-1.0 + 1e-4, 1.0 - 1e-4);
+        let dot = (0..4)
+            .map(|a| qk[a] * qk1[a])
+            .sum::<f64>()
+            .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
         let w = dot.acos().max(1e-4);
         let s = w.sin().max(1e-4);
         let (mut p0, mut p1) = (((1.0 - d) * w).sin() / s, (d * w).sin() / s);
@@ -62,7 +75,11 @@ pub fn deform_reference(
         p0 /= sum;
         p1 /= sum;
         let r: [f64; 4] = std::array::from_fn(|a| p0 * qk[a] + p1 * qk1[a]);
-        let r = if r.iter().map(|v| v.abs()).sum::<f64>() <= 1e-4 { qk } else { norm(r) };
+        let r = if r.iter().map(|v| v.abs()).sum::<f64>() <= 1e-4 {
+            qk
+        } else {
+            norm(r)
+        };
         out.rotations[i] = r.map(|v| v as f32);
         if m.scale_offsets {
             for a in 0..3 {

@@ -51,14 +51,18 @@ fn index_seeks_and_frame_lookup() {
         assert!(*dec.gop_canonical(gop).unwrap() == want[gop as usize]);
     }
     // 30 fps, 2 frames per GOP: t = 0.2 s is frame 6, GOP 3.
-    assert!(*dec.frame_at(0.2).unwrap() == want[3]);
-    assert!(*dec.frame_at(0.0).unwrap() == want[0]);
+    let o = dlgs_decoder::FrameOptions {
+        camera_center: [0.0; 3],
+        language: false,
+    };
+    assert!(dec.frame_at(0.2, &o).unwrap().merged() == want[3].merged());
+    assert!(dec.frame_at(0.0, &o).unwrap().merged() == want[0].merged());
     assert!(matches!(
-        dec.frame_at(1.0).unwrap_err().kind,
+        dec.frame_at(1.0, &o).err().unwrap().kind,
         ErrorKind::Request(_)
     ));
     assert!(matches!(
-        dec.frame_at(f64::NAN).unwrap_err().kind,
+        dec.frame_at(f64::NAN, &o).err().unwrap().kind,
         ErrorKind::Request(_)
     ));
     assert!(matches!(

@@ -168,7 +168,10 @@ fn hevc_lossless_is_exactly_the_12_bit_quantisation() {
     let t = Tiling::for_count(f.n, f.keys, f.channels);
     let r = time_features::ranges(f, false);
     let want = time_features::untile(&time_features::tile(f, &t, &r), &t, &r);
-    assert_eq!(got, &want, "lossless HEVC must reproduce the 12-bit samples");
+    assert_eq!(
+        got, &want,
+        "lossless HEVC must reproduce the 12-bit samples"
+    );
     let (max, _) = feature_error_table(&m, &bytes);
     assert!(max <= 0.5 / 4095.0 + 1e-6, "quantisation error {max}");
 }
@@ -178,7 +181,11 @@ fn hevc_crf6_feature_error_per_channel() {
     let m = model(false, 1);
     let bytes = encode(&m, FeatureCodec::Hevc(HevcSettings::default()));
     let (max, mean) = feature_error_table(&m, &bytes);
-    println!("crf 6: worst channel max error {:.4} % of range, worst mean {:.5} %", 100.0 * max, 100.0 * mean);
+    println!(
+        "crf 6: worst channel max error {:.4} % of range, worst mean {:.5} %",
+        100.0 * max,
+        100.0 * mean
+    );
     // Measured on this scene (Morton-ordered tiles, no PLAS sort): mean ≈ 0.5 % of the range
     // (about 20 12-bit steps), max ≈ 4.6 %. The bounds leave room for x265 versions.
     assert!(mean < 0.01, "mean error {mean}");
@@ -249,7 +256,10 @@ fn sparser_keys_interpolate() {
         let mut worst = f64::INFINITY;
         for f in 0..60 {
             let t = f as f64 / 30.0;
-            let p = metrics::psnr(&render_at(&mut full_dec, t, &cam), &render_at(&mut dec, t, &cam));
+            let p = metrics::psnr(
+                &render_at(&mut full_dec, t, &cam),
+                &render_at(&mut dec, t, &cam),
+            );
             if p.is_finite() {
                 sum += p;
                 n += 1;
@@ -271,7 +281,10 @@ fn frames_do_not_depend_on_thread_count() {
     let bytes = exact(&m);
     let cam = camera(&m);
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
             let mut dec = open(&bytes);
             dec.frame_at(0.77, &opts(&cam, true)).unwrap().dynamics
@@ -302,7 +315,15 @@ fn language_decoder_runs_only_when_asked() {
     assert_eq!(without.dynamics.lang, m.canonical.dynamics.lang);
     let with = dec.frame_at(0.5, &opts(&cam, true)).unwrap();
     assert_ne!(with.dynamics.lang, m.canonical.dynamics.lang);
-    let img = render(&with.merged(), &cam, &RenderOptions { features: true, ..Default::default() }).unwrap();
+    let img = render(
+        &with.merged(),
+        &cam,
+        &RenderOptions {
+            features: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert!(img.features.unwrap().iter().all(|v| v.is_finite()));
 }
 
@@ -334,8 +355,14 @@ fn f16_weights_cost_little() {
     };
     let half = write_model(&m, cfg, Vec::new()).unwrap();
     let (mut a, mut b) = (open(&reference), open(&half));
-    let p = metrics::psnr(&render_at(&mut a, 0.77, &cam), &render_at(&mut b, 0.77, &cam));
-    println!("f16 MLP weights: {} bytes smaller, PSNR vs f32 {p:.2} dB", reference.len() - half.len());
+    let p = metrics::psnr(
+        &render_at(&mut a, 0.77, &cam),
+        &render_at(&mut b, 0.77, &cam),
+    );
+    println!(
+        "f16 MLP weights: {} bytes smaller, PSNR vs f32 {p:.2} dB",
+        reference.len() - half.len()
+    );
     assert!(p > 45.0);
 }
 
@@ -347,6 +374,14 @@ fn encoder_rejects_non_finite_dynamic_input() {
     assert!(err.to_string().contains("not finite"), "{err}");
     let mut m = model(false, 1);
     m.gops[0].mlps.color.layers[1].weights[3] = f32::INFINITY;
-    let err = write_model(&m, EncoderConfig { features: FeatureCodec::Exact, ..Default::default() }, Vec::new()).unwrap_err();
+    let err = write_model(
+        &m,
+        EncoderConfig {
+            features: FeatureCodec::Exact,
+            ..Default::default()
+        },
+        Vec::new(),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("not finite"), "{err}");
 }

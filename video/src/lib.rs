@@ -6,8 +6,8 @@
 
 use std::sync::Once;
 
-use ffmpeg_next as ff;
 use ff::format::Pixel;
+use ffmpeg_next as ff;
 
 /// What went wrong inside FFmpeg, with FFmpeg's own message.
 #[derive(Debug, thiserror::Error)]
@@ -173,7 +173,18 @@ pub fn decode_gray12(
     init();
     let codec = ff::decoder::find(ff::codec::Id::HEVC).ok_or(VideoError::MissingCodec("HEVC"))?;
     let ctx = ff::codec::context::Context::new_with_codec(codec);
-    let mut dec = ctx.decoder().video().map_err(ff_err("decoder setup"))?;
+    // Bound what a hostile bitstream can make FFmpeg allocate: pictures larger than the
+    // declared size are refused inside FFmpeg (AVCodecContext.max_pixels).
+    let mut opts = ff::Dictionary::new();
+    opts.set(
+        "max_pixels",
+        &(width as u64 * height as u64).max(1).to_string(),
+    );
+    let mut dec = ctx
+        .decoder()
+        .open_as_with(codec, opts)
+        .and_then(|o| o.video())
+        .map_err(ff_err("decoder setup"))?;
     let mut out = Gray12 {
         width,
         height,
@@ -300,7 +311,9 @@ mod tests {
 
     #[test]
     fn garbage_is_an_error_not_a_crash() {
-        let junk: Vec<u8> = (0..5000u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect();
+        let junk: Vec<u8> = (0..5000u32)
+            .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+            .collect();
         assert!(decode_gray12(&[&junk], 64, 64, 7).is_err());
         assert!(decode_gray12(&[], 64, 64, 7).is_err());
     }

@@ -1,0 +1,225 @@
+//! `dlgs encode` (splat scene -> still, or .dlgs -> re-encoded .dlgs) and `dlgs synth`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use dlgs::container::header::DeformModel;
+use dlgs::payload::mlp_weights::WeightType;
+use dlgs::payload::raw_canonical::RawCodec;
+use dlgs_decoder::Decoder;
+use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
+use dlgs_encoder::{EncoderConfig, FeatureCodec, HevcSettings, StreamEncoder};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::scene_io::is_dlgs;
+
+/// Encoder settings shared by `encode` and `synth`.
+#[derive(Args, Debug, Clone)]
+pub struct CodecArgs {
+    /// Store raw canonical floats without zstd.
+    #[arg(long)]
+    pub no_zstd: bool,
+    /// zstd level for raw canonical, exact features and MLP chunks.
+    #[arg(long, default_value_t = 9)]
+    pub zstd_level: i32,
+    /// x265 constant rate factor for the time-feature video (the reference uses 6).
+    #[arg(long, default_value_t = 6)]
+    pub crf: u8,
+    /// x265 preset (ultrafast .. placebo).
+    #[arg(long, default_value = "medium")]
+    pub preset: String,
+    /// Lossless HEVC: the 12-bit quantised features exactly.
+    #[arg(long)]
+    pub lossless_features: bool,
+    /// Store time features as exact f32 (zstd) instead of HEVC.
+    #[arg(long)]
+    pub exact_features: bool,
+    /// One quantisation range for all 16 channels, as the reference (default: per channel).
+    #[arg(long)]
+    pub per_gop_range: bool,
+    /// Store MLP weights as f16 (default f32).
+    #[arg(long)]
+    pub mlp_f16: bool,
+}
+
+impl CodecArgs {
+    pub fn config(&self, meta: serde_json::Value) -> EncoderConfig {
+        EncoderConfig {
+            raw_codec: if self.no_zstd {
+                RawCodec::None
+            } else {
+                RawCodec::Zstd
+            },
+            zstd_level: self.zstd_level,
+            meta: Some(meta),
+            features: if self.exact_features {
+                FeatureCodec::Exact
+            } else {
+                FeatureCodec::Hevc(HevcSettings {
+                    crf: self.crf,
+                    preset: self.preset.clone(),
+                    lossless: self.lossless_features,
+                })
+            },
+            per_gop_range: self.per_gop_range,
+            mlp_weights: if self.mlp_f16 {
+                WeightType::F16
+            } else {
+                WeightType::F32
+            },
+        }
+    }
+}
+
+fn meta(input: &Path, extra: serde_json::Value) -> serde_json::Value {
+    serde_json::json!({
+        "source": input.file_name().map(|s| s.to_string_lossy().to_string()),
+        "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
+        "settings": extra,
+    })
+}
+
+fn bar(len: u64, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} GOPs, {elapsed}")
+            .expect("static template"),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+fn report(input: &Path, output: &Path, frames: u32) -> Result<()> {
+    let size = std::fs::metadata(output)?.len();
+    let in_size = std::fs::metadata(input)?.len();
+    println!(
+        "{} -> {}: {size} bytes ({:.1}% of input), {:.0} bytes/frame over {frames} frames",
+        input.display(),
+        output.display(),
+        100.0 * size as f64 / in_size.max(1) as f64,
+        size as f64 / frames.max(1) as f64
+    );
+    Ok(())
+}
+
+pub fn run_encode(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> {
+    let settings = serde_json::json!(format!("{codec:?}"));
+    let f =
+        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
+    let out = std::io::BufWriter::new(f);
+    if !is_dlgs(input) {
+        let g = dlgs::interop::read_splat_file(input)
+            .with_context(|| format!("reading {}", input.display()))?;
+        dlgs_encoder::encode_still(&g, codec.config(meta(input, settings)), out)?;
+        println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
+        return report(input, output, 1);
+    }
+    // Re-encode every GOP of an existing stream with new settings.
+    let mut dec =
+        Decoder::open_path(input).with_context(|| format!("opening {}", input.display()))?;
+    let scene = dec.scene().clone();
+    let mut enc = StreamEncoder::new(out, scene.clone(), codec.config(meta(input, settings)))?;
+    let pb = bar(scene.gop_count as u64, "encoding");
+    for g in 0..scene.gop_count {
+        let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;
+        enc.push_gop(&gop.canonical, gop.dynamic.as_ref())
+            .with_context(|| format!("encoding GOP {g}"))?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let mut w = enc.finish()?;
+    std::io::Write::flush(&mut w)?;
+    report(input, output, scene.frame_count)
+}
+
+/// `dlgs synth`: a dynamic test model from a real scene.
+#[derive(Args, Debug, Clone)]
+pub struct SynthArgs {
+    /// Real canonical scene (PLY, .splat, SPZ).
+    pub input: PathBuf,
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Fraction of Gaussians that move.
+    #[arg(long, default_value_t = 0.3)]
+    pub dynamic_fraction: f32,
+    /// Cap on the number of dynamic Gaussians (0 = none).
+    #[arg(long, default_value_t = 0)]
+    pub max_dynamic: usize,
+    #[arg(long, default_value_t = 1)]
+    pub gops: u32,
+    #[arg(long, default_value_t = 60)]
+    pub gop_length: u32,
+    #[arg(long, default_value_t = 10)]
+    pub key_interval: u32,
+    #[arg(long, default_value_t = 30)]
+    pub fps: u32,
+    /// Motion amplitude relative to the scene size.
+    #[arg(long, default_value_t = 0.03)]
+    pub motion: f32,
+    /// Add 9-dim language (synthetic if the scene has none) and a language decoder.
+    #[arg(long)]
+    pub language: bool,
+    /// Use the paper's plain lerp deformation instead of the reference code's.
+    #[arg(long)]
+    pub paper_lerp: bool,
+    #[arg(long, default_value_t = 6666)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub codec: CodecArgs,
+}
+
+pub fn run_synth(a: &SynthArgs) -> Result<()> {
+    let g = dlgs::interop::read_splat_file(&a.input)
+        .with_context(|| format!("reading {}", a.input.display()))?;
+    if a.gop_length == 0 || a.key_interval == 0 || !a.gop_length.is_multiple_of(a.key_interval) {
+        bail!("--gop-length must be a positive multiple of --key-interval");
+    }
+    let spec = SynthSpec {
+        dynamic_fraction: a.dynamic_fraction,
+        max_dynamic: a.max_dynamic,
+        gops: a.gops,
+        gop_length: a.gop_length,
+        key_interval: a.key_interval,
+        fps: a.fps,
+        motion: a.motion,
+        language: a.language,
+        deform_model: if a.paper_lerp {
+            DeformModel::PaperLerp
+        } else {
+            DeformModel::Reference
+        },
+        seed: a.seed,
+    };
+    let model = synth_dynamic(&g, &spec)?;
+    let settings =
+        serde_json::json!({"synthetic": format!("{spec:?}"), "codec": format!("{:?}", a.codec)});
+    let mut m = meta(&a.input, settings);
+    m["note"] = serde_json::json!("SYNTHETIC motion and time features on a real canonical scene; not a trained DLGStream model");
+    let f = std::fs::File::create(&a.output)
+        .with_context(|| format!("creating {}", a.output.display()))?;
+    let pb = bar(model.gops.len() as u64, "encoding");
+    let mut enc = StreamEncoder::new(
+        std::io::BufWriter::new(f),
+        model.scene.clone(),
+        a.codec.config(m),
+    )?;
+    for (i, d) in model.gops.iter().enumerate() {
+        enc.push_gop(&model.canonical, Some(d))
+            .with_context(|| format!("encoding GOP {i}"))?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let mut w = enc.finish()?;
+    std::io::Write::flush(&mut w)?;
+    println!(
+        "synthetic dynamic model: {} static + {} dynamic Gaussians, {} GOPs x {} frames at {} FPS, keys every {} frames",
+        model.scene.n_static,
+        model.scene.n_dynamic,
+        model.scene.gop_count,
+        model.scene.gop_length,
+        model.scene.fps_num,
+        model.scene.key_interval
+    );
+    report(&a.input, &a.output, model.scene.frame_count)
+}

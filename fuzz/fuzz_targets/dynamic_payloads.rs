@@ -1,0 +1,28 @@
+//! The TFEA and MLPW payload parsers directly, against a fixed dynamic scene header.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let mut s = dlgs::SceneHeader::still(0, 1);
+    s.n_dynamic = 1;
+    s.time_channels = 16;
+    s.gop_length = 60;
+    s.key_interval = 10;
+    s.frame_count = 60;
+    s.lang_levels = 3;
+    s.lang_dims = 3;
+    let limits = dlgs::Limits::tiny();
+    let (sel, body) = data.split_first().unwrap_or((&0, &[]));
+    if sel & 1 == 0 {
+        if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, packets }) =
+            dlgs::payload::time_features::decode(body, 0, &s, &limits)
+        {
+            let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
+            if let Ok(v) = dlgs_video::decode_gray12(&refs, tiling.width() as u32, tiling.height() as u32, tiling.keys) {
+                let _ = dlgs::payload::time_features::untile(&v.frames, &tiling, &ranges);
+            }
+        }
+    } else {
+        let _ = dlgs::payload::mlp_weights::decode(body, 0, &s, &limits);
+    }
+});
