@@ -173,13 +173,12 @@ pub fn decode_gray12(
     init();
     let codec = ff::decoder::find(ff::codec::Id::HEVC).ok_or(VideoError::MissingCodec("HEVC"))?;
     let ctx = ff::codec::context::Context::new_with_codec(codec);
-    // Bound what a hostile bitstream can make FFmpeg allocate: pictures larger than the
-    // declared size are refused inside FFmpeg (AVCodecContext.max_pixels).
+    // Bound what a hostile bitstream can make FFmpeg allocate: pictures much larger than the
+    // declared size are refused inside FFmpeg (AVCodecContext.max_pixels). The margin covers
+    // the coding-block padding FFmpeg adds before that check.
     let mut opts = ff::Dictionary::new();
-    opts.set(
-        "max_pixels",
-        &(width as u64 * height as u64).max(1).to_string(),
-    );
+    let max_pixels = (width as u64 + 128) * (height as u64 + 128);
+    opts.set("max_pixels", &max_pixels.to_string());
     let mut dec = ctx
         .decoder()
         .open_as_with(codec, opts)
@@ -290,6 +289,23 @@ mod tests {
         let refs: Vec<&[u8]> = pk.iter().map(|p| p.as_slice()).collect();
         let d = decode_gray12(&refs, 64, 48, 7).unwrap();
         assert_eq!(d, v);
+    }
+
+    #[test]
+    fn tile_sizes_the_encoder_produces_decode() {
+        // Sides 4 x side for side = 16 (minimum), 46, 185, 283 (80k Gaussians).
+        for side in [16u32, 46, 185, 283] {
+            let v = ramp(4 * side, 4 * side, 2);
+            let s = HevcSettings {
+                lossless: true,
+                preset: "ultrafast".into(),
+                ..Default::default()
+            };
+            let pk = encode_gray12(&v, &s).unwrap();
+            let refs: Vec<&[u8]> = pk.iter().map(|p| p.as_slice()).collect();
+            let d = decode_gray12(&refs, 4 * side, 4 * side, 2).unwrap();
+            assert_eq!(d, v, "side {side}");
+        }
     }
 
     #[test]
