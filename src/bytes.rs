@@ -117,3 +117,17 @@ impl PutLe for Vec<u8> {
         }
     }
 }
+
+/// Decompress one zstd frame that must yield exactly `len` bytes (never more is allocated);
+/// anything else is `Decompress` at `at`. Check `len` against the limits first.
+pub fn zstd_exact(data: &[u8], len: u64, at: u64) -> Result<Vec<u8>> {
+    let out = zstd::bulk::decompress(data, len as usize)
+        .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), at))?;
+    if out.len() as u64 != len {
+        return Err(Error::new(
+            ErrorKind::Decompress(format!("{} bytes decompressed, {len} declared", out.len())),
+            at,
+        ));
+    }
+    Ok(out)
+}

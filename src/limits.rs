@@ -32,6 +32,21 @@ impl Default for Limits {
 }
 
 impl Limits {
+    /// `LimitExceeded` at `at` if a buffer of `bytes` would pass `max_alloc`.
+    pub fn check_alloc(&self, what: &'static str, bytes: u64, at: u64) -> crate::Result<()> {
+        if bytes > self.max_alloc {
+            return Err(crate::Error::new(
+                crate::ErrorKind::LimitExceeded {
+                    what,
+                    value: bytes,
+                    limit: self.max_alloc,
+                },
+                at,
+            ));
+        }
+        Ok(())
+    }
+
     /// Small limits for fuzzing and untrusted input in tests.
     pub fn tiny() -> Self {
         Limits {

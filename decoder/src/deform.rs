@@ -37,7 +37,8 @@ struct KeyGeometry {
 /// A GOP's deformation field, ready to produce frames.
 pub struct Deformer {
     model: DeformModel,
-    features: TimeFeatures,
+    /// The decoded field; the prepared MLPs below are its weights, transposed.
+    gop: DynamicGop,
     deform: PreparedMlp,
     cov: PreparedMlp,
     opacity: PreparedMlp,
@@ -99,11 +100,10 @@ fn lerp_rows(
 impl Deformer {
     /// Prepare a GOP: transposes weights and, for the reference model, evaluates the geometry
     /// decoders on every key (`N * K` rows).
-    pub fn new(canon: &Gaussians, gop: &DynamicGop, model: DeformModel) -> Self {
+    pub fn new(canon: &Gaussians, gop: DynamicGop, model: DeformModel) -> Self {
         let m = &gop.mlps;
         let mut d = Deformer {
             model,
-            features: gop.features.clone(),
             deform: PreparedMlp::new(&m.deform),
             cov: PreparedMlp::new(&m.cov),
             opacity: PreparedMlp::new(&m.opacity),
@@ -111,6 +111,7 @@ impl Deformer {
             lang: m.lang.as_ref().map(PreparedMlp::new),
             scale_offsets: m.scale_offsets,
             geometry: None,
+            gop,
         };
         if model == DeformModel::Reference {
             d.geometry = Some(d.key_geometry(canon));
@@ -118,8 +119,17 @@ impl Deformer {
         d
     }
 
+    /// The time features and decoders this deformer was built from.
+    pub fn gop(&self) -> &DynamicGop {
+        &self.gop
+    }
+
+    fn features(&self) -> &TimeFeatures {
+        &self.gop.features
+    }
+
     fn key_geometry(&self, canon: &Gaussians) -> KeyGeometry {
-        let f = &self.features;
+        let f = self.features();
         let keys = f.keys;
         let parts: Vec<KeyGeometry> = blocks(f.n)
             .map(|rows| {
@@ -177,7 +187,7 @@ impl Deformer {
         opts: &FrameOptions,
     ) -> Gaussians {
         let language = opts.language && self.lang.is_some() && canon.has_language();
-        let parts: Vec<Gaussians> = blocks(self.features.n)
+        let parts: Vec<Gaussians> = blocks(self.features().n)
             .map(|rows| self.frame_block(canon, rows, key, delta, opts.camera_center, language))
             .collect();
         let mut out = Gaussians::new(canon.sh_degree, canon.lang_width);
@@ -196,7 +206,7 @@ impl Deformer {
         cam: [f32; 3],
         language: bool,
     ) -> Gaussians {
-        let f = &self.features;
+        let f = self.features();
         let n = rows.len();
         let mut g = Gaussians::new(canon.sh_degree, canon.lang_width);
         g.positions.reserve(n);

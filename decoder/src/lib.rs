@@ -22,8 +22,14 @@ pub use deform::{Deformer, FrameOptions};
 pub struct DecodedGop {
     pub index: u32,
     pub canonical: Arc<Canonical>,
-    pub dynamic: Option<DynamicGop>,
     pub deformer: Option<Deformer>,
+}
+
+impl DecodedGop {
+    /// The GOP's time features and decoders, if the scene has dynamic Gaussians.
+    pub fn dynamic(&self) -> Option<&DynamicGop> {
+        self.deformer.as_ref().map(Deformer::gop)
+    }
 }
 
 /// The Gaussians of one instant: the GOP's static set (shared, untouched) and the deformed
@@ -149,13 +155,10 @@ impl<R: Read + Seek> Decoder<R> {
             let mlps = mlp_weights::decode(&p, mlpw.payload_offset(), &scene, &limits)?;
             dynamic = Some(DynamicGop { features, mlps });
         }
-        let deformer = dynamic
-            .as_ref()
-            .map(|d| Deformer::new(&canonical.dynamics, d, scene.deform_model));
+        let deformer = dynamic.map(|d| Deformer::new(&canonical.dynamics, d, scene.deform_model));
         let gop = Arc::new(DecodedGop {
             index: g,
             canonical,
-            dynamic,
             deformer,
         });
         self.cached = Some(gop.clone());

@@ -1,7 +1,7 @@
 //! `MLPW`: the deformation decoders of one GOP (format-spec §6.3): shapes, then every weight
 //! in one zstd frame as f32 or f16.
 
-use crate::bytes::{ByteReader, PutLe};
+use crate::bytes::{zstd_exact, ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::dynamic::check_finite;
@@ -66,7 +66,7 @@ pub fn encode(m: &DeformMlps, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>
                                 0,
                             ));
                         }
-                        b_put_u16(&mut raw, h.to_bits());
+                        raw.put_u16(h.to_bits());
                     }
                 }
             }
@@ -77,10 +77,6 @@ pub fn encode(m: &DeformMlps, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>
     b.put_u32(raw.len() as u32);
     b.extend_from_slice(&z);
     Ok(b)
-}
-
-fn b_put_u16(v: &mut Vec<u8>, x: u16) {
-    v.extend_from_slice(&x.to_le_bytes());
 }
 
 fn bad(reason: String, at: u64) -> Error {
@@ -147,25 +143,9 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             raw_at,
         ));
     }
-    if raw_len > limits.max_alloc {
-        return Err(Error::new(
-            ErrorKind::LimitExceeded {
-                what: "MLPW weights",
-                value: raw_len,
-                limit: limits.max_alloc,
-            },
-            raw_at,
-        ));
-    }
+    limits.check_alloc("MLPW weights", raw_len, raw_at)?;
     let body_at = r.offset();
-    let raw = zstd::bulk::decompress(r.rest(), raw_len as usize)
-        .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), body_at))?;
-    if raw.len() as u64 != raw_len {
-        return Err(Error::new(
-            ErrorKind::Decompress(format!("{} weight bytes, {raw_len} declared", raw.len())),
-            body_at,
-        ));
-    }
+    let raw = zstd_exact(r.rest(), raw_len, body_at)?;
     let mut values = raw.chunks_exact(ty.size()).map(|b| match ty {
         WeightType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
         WeightType::F16 => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),

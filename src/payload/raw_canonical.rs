@@ -156,16 +156,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             at,
         ));
     }
-    if body_len > limits.max_alloc {
-        return Err(Error::new(
-            ErrorKind::LimitExceeded {
-                what: "CRAW body",
-                value: body_len,
-                limit: limits.max_alloc,
-            },
-            at,
-        ));
-    }
+    limits.check_alloc("CRAW body", body_len, at)?;
     let body_at = r.offset();
     let rest = r.rest();
     let owned;
@@ -180,17 +171,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             rest
         }
         RawCodec::Zstd => {
-            owned = zstd::bulk::decompress(rest, body_len as usize)
-                .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), body_at))?;
-            if owned.len() as u64 != body_len {
-                return Err(Error::new(
-                    ErrorKind::Decompress(format!(
-                        "{} bytes decompressed, {body_len} declared",
-                        owned.len()
-                    )),
-                    body_at,
-                ));
-            }
+            owned = crate::bytes::zstd_exact(rest, body_len, body_at)?;
             &owned
         }
     };

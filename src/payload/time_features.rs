@@ -3,7 +3,7 @@
 //! K-frame sequence. This module owns the framing, tiling and quantisation; the HEVC bitstream
 //! itself is produced and decoded by `dlgs-video` (FFmpeg), outside this crate.
 
-use crate::bytes::{ByteReader, PutLe};
+use crate::bytes::{zstd_exact, ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::TimeFeatures;
@@ -46,14 +46,14 @@ impl Tiling {
         while side * side < n {
             side += 1;
         }
-        let min_side = 64usize.div_ceil(TILE_COLUMNS.min(channels.div_ceil(TILE_COLUMNS)).max(1));
-        side = side.max(min_side);
         let mut t = Tiling {
             n,
             keys,
             channels,
-            side: side.max(1),
+            side,
         };
+        // Both sides >= 64: the shorter of 4 tile columns and `tile_rows` tile rows decides.
+        t.side = side.max(64usize.div_ceil(TILE_COLUMNS.min(t.tile_rows()).max(1)));
         if t.height() % 2 == 1 || t.width() % 2 == 1 {
             t.side += 1;
         }
@@ -245,28 +245,9 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     match (codec, depth) {
         (0, 0) => {
             let len = floats * 4;
-            if len > limits.max_alloc {
-                return Err(Error::new(
-                    ErrorKind::LimitExceeded {
-                        what: "TFEA features",
-                        value: len,
-                        limit: limits.max_alloc,
-                    },
-                    at,
-                ));
-            }
+            limits.check_alloc("TFEA features", len, at)?;
             let body_at = r.offset();
-            let raw = zstd::bulk::decompress(r.rest(), len as usize)
-                .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), body_at))?;
-            if raw.len() as u64 != len {
-                return Err(Error::new(
-                    ErrorKind::Decompress(format!(
-                        "{} bytes decompressed, {len} needed",
-                        raw.len()
-                    )),
-                    body_at,
-                ));
-            }
+            let raw = zstd_exact(r.rest(), len, body_at)?;
             let data = raw
                 .chunks_exact(4)
                 .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -300,23 +281,13 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 ));
             }
             let pixels = (tiling.width() * tiling.height()) as u64 * keys as u64 * 2;
-            if pixels > limits.max_alloc {
-                return Err(Error::new(
-                    ErrorKind::LimitExceeded {
-                        what: "TFEA decoded images",
-                        value: pixels,
-                        limit: limits.max_alloc,
-                    },
-                    at,
-                ));
-            }
+            limits.check_alloc("TFEA decoded images", pixels, at)?;
             let mut ranges = Vec::with_capacity(channels);
             for _ in 0..channels {
                 let lo = r.finite_f32("TFEA range lo")?;
                 let hi = r.finite_f32("TFEA range hi")?;
                 ranges.push((lo, hi));
             }
-            let at = r.offset();
             let count = r.u32("TFEA packet count")? as usize;
             // Every packet needs at least its 4-byte length: bounds the loop by the bytes present.
             if count as u64 * 4 > r.remaining() as u64 {
@@ -326,7 +297,6 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                     available: r.remaining() as u64,
                 }));
             }
-            let _ = at;
             let mut packets = Vec::with_capacity(count);
             for _ in 0..count {
                 let len = r.u32("TFEA packet length")? as usize;
