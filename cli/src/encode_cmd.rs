@@ -123,7 +123,7 @@ pub fn run_encode(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> 
     let pb = bar(scene.gop_count as u64, "encoding");
     for g in 0..scene.gop_count {
         let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;
-        enc.push_gop(&gop.canonical, gop.dynamic())
+        enc.push_gop(&gop.canonical, gop.dynamic().as_ref())
             .with_context(|| format!("encoding GOP {g}"))?;
         pb.inc(1);
     }

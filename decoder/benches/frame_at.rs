@@ -48,19 +48,36 @@ fn bench(c: &mut Criterion) {
                 language,
             };
             let mut t = 0.0f64;
-            group.bench_function(format!("{label}/{threads}t"), |b| {
+            group.bench_function(format!("{label}/{threads}t/new-buffers"), |b| {
                 b.iter(|| {
                     t = (t + 0.0123) % 1.9;
                     pool.install(|| dec.frame_at(t, &o).unwrap())
                 })
             });
-            // A plain timing for the FLOP rate line.
-            let runs = 30;
-            let start = Instant::now();
-            for i in 0..runs {
-                pool.install(|| dec.frame_at(i as f64 * 0.061, &o).unwrap());
-            }
-            let s = start.elapsed().as_secs_f64() / runs as f64;
+            // A player: the previous frame's buffers are reused.
+            let mut buf = Some(dlgs::model::Gaussians::default());
+            group.bench_function(format!("{label}/{threads}t/reused-buffers"), |b| {
+                b.iter(|| {
+                    t = (t + 0.0123) % 1.9;
+                    let f = pool
+                        .install(|| dec.frame_at_reusing(t, &o, buf.take().unwrap()))
+                        .unwrap();
+                    buf = Some(f.dynamics);
+                })
+            });
+            // A plain timing (reused buffers, median of 60 frames) for the FLOP rate line.
+            let mut times: Vec<f64> = (0..60)
+                .map(|i| {
+                    let start = Instant::now();
+                    let f = pool
+                        .install(|| dec.frame_at_reusing(i as f64 * 0.031, &o, buf.take().unwrap()))
+                        .unwrap();
+                    buf = Some(f.dynamics);
+                    start.elapsed().as_secs_f64()
+                })
+                .collect();
+            times.sort_by(f64::total_cmp);
+            let s = times[times.len() / 2];
             println!(
                 "{label}/{threads}t: {:.2} ms/frame = {:.0} frames/s; MLP work {:.3} GFLOP/frame -> {:.1} GFLOP/s",
                 s * 1e3,

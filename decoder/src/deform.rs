@@ -1,16 +1,18 @@
 //! Turn a GOP's canonical dynamic Gaussians plus its deformation field into the Gaussians of
 //! one instant (format-spec §6.4). Geometry that depends only on a key is computed once per GOP;
 //! per frame only the Hermite/slerp blend and the view-dependent appearance (and language, if
-//! asked) are evaluated, as GEMMs over fixed blocks of rows so the result never depends on the
-//! thread count.
+//! asked) are evaluated. Work is split into fixed blocks of rows, each written in place into the
+//! output, so the result never depends on the thread count.
+
+use std::ops::Range;
 
 use dlgs::container::header::DeformModel;
-use dlgs::model::{DynamicGop, Gaussians, TimeFeatures};
-use ndarray::{Array2, ArrayView2};
+use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
 use rayon::prelude::*;
 
-use crate::interp::{hermite, lerp, normalize4, slerp_reference};
-use crate::mlp::PreparedMlp;
+use crate::interp::{hermite, normalize4, slerp_angle, slerp_blend};
+use crate::panel::{PanelMlp, Scratch, PANEL};
+use crate::planar::PlanarFeatures;
 
 /// Rows per block. Fixed (not derived from the thread count) so output is deterministic.
 pub const BLOCK: usize = 1024;
@@ -25,11 +27,14 @@ pub struct FrameOptions {
 }
 
 /// Per-key geometry of the reference model (§6.4), `[i * keys + k]`.
+#[derive(Default)]
 struct KeyGeometry {
     pos: Vec<[f32; 3]>,
     tangent: Vec<[f32; 3]>,
     /// Normalised `q_c + Δq_k`.
     quat: Vec<[f32; 4]>,
+    /// `(ω, sin ω)` of the slerp from key `k` to `k + 1` (unused for the last key).
+    angle: Vec<[f32; 2]>,
     /// `Δlog-scale_k`, when the GOP applies scale offsets.
     dscale: Option<Vec<[f32; 3]>>,
 }
@@ -37,81 +42,76 @@ struct KeyGeometry {
 /// A GOP's deformation field, ready to produce frames.
 pub struct Deformer {
     model: DeformModel,
-    /// The decoded field; the prepared MLPs below are its weights, transposed.
-    gop: DynamicGop,
-    deform: PreparedMlp,
-    cov: PreparedMlp,
-    opacity: PreparedMlp,
-    color: PreparedMlp,
-    lang: Option<PreparedMlp>,
+    /// The time features, key- and channel-major.
+    features: PlanarFeatures,
+    /// The decoders as decoded; the panel MLPs below hold copies of their weights.
+    mlps: DeformMlps,
+    deform: PanelMlp,
+    cov: PanelMlp,
+    opacity: PanelMlp,
+    color: PanelMlp,
+    lang: Option<PanelMlp>,
     scale_offsets: bool,
     geometry: Option<KeyGeometry>,
 }
 
-fn blocks(n: usize) -> impl IndexedParallelIterator<Item = std::ops::Range<usize>> {
+fn block_ranges(n: usize) -> Vec<Range<usize>> {
     (0..n.div_ceil(BLOCK))
-        .into_par_iter()
-        .map(move |b| b * BLOCK..((b + 1) * BLOCK).min(n))
+        .map(|b| b * BLOCK..((b + 1) * BLOCK).min(n))
+        .collect()
 }
 
-/// Rows `F[i, k, c0..c0+w]` of a block, as a matrix.
-fn key_rows(
-    f: &TimeFeatures,
-    rows: std::ops::Range<usize>,
-    k: usize,
-    c0: usize,
-    w: usize,
-) -> Array2<f32> {
-    let mut x = Array2::zeros((rows.len(), w));
-    for (r, i) in rows.enumerate() {
-        x.row_mut(r)
-            .as_slice_mut()
-            .expect("standard layout")
-            .copy_from_slice(&f.at(i, k)[c0..c0 + w]);
-    }
-    x
+/// Cut `v` into one slice per block, `per_row` elements per row (empty slices if `v` is).
+fn split_rows<'a, T>(
+    mut v: &'a mut [T],
+    per_row: usize,
+    blocks: &[Range<usize>],
+) -> Vec<&'a mut [T]> {
+    blocks
+        .iter()
+        .map(|r| {
+            let (head, tail) = std::mem::take(&mut v).split_at_mut(r.len() * per_row);
+            v = tail;
+            head
+        })
+        .collect()
 }
 
-/// `lerp(F_k, F_k1, δ)[c0..c0+w]` of a block, written into the first `w` columns of a
-/// `(rows, w + extra)` matrix.
-fn lerp_rows(
-    f: &TimeFeatures,
-    rows: std::ops::Range<usize>,
-    k: usize,
-    d: f32,
-    c0: usize,
-    w: usize,
-    extra: usize,
-) -> Array2<f32> {
-    let cols = w + extra;
-    let mut buf = vec![0f32; rows.len() * cols];
-    let (keys, ch) = (f.keys, f.channels);
-    for (dst, i) in buf.chunks_exact_mut(cols).zip(rows) {
-        let a0 = (i * keys + k) * ch + c0;
-        let a = &f.data[a0..a0 + w];
-        let b = &f.data[a0 + ch..a0 + ch + w];
-        for ((d_, &x), &y) in dst[..w].iter_mut().zip(a).zip(b) {
-            *d_ = lerp(x, y, d);
-        }
-    }
-    Array2::from_shape_vec((buf.len() / cols, cols), buf).expect("sized above")
+/// Panels of at most [`PANEL`] rows covering `rows`.
+fn panels(rows: Range<usize>) -> impl Iterator<Item = Range<usize>> {
+    rows.clone()
+        .step_by(PANEL)
+        .map(move |s| s..(s + PANEL).min(rows.end))
+}
+
+/// The output rows of one block, written in place.
+struct BlockOut<'a> {
+    rows: Range<usize>,
+    pos: &'a mut [[f32; 3]],
+    scale: &'a mut [[f32; 3]],
+    rot: &'a mut [[f32; 4]],
+    opacity: &'a mut [f32],
+    lang_opacity: &'a mut [f32],
+    sh: &'a mut [f32],
+    lang: &'a mut [f32],
 }
 
 impl Deformer {
-    /// Prepare a GOP: transposes weights and, for the reference model, evaluates the geometry
-    /// decoders on every key (`N * K` rows).
+    /// Prepare a GOP; for the reference model, evaluates the geometry decoders on every key
+    /// (`N * K` rows).
     pub fn new(canon: &Gaussians, gop: DynamicGop, model: DeformModel) -> Self {
         let m = &gop.mlps;
         let mut d = Deformer {
             model,
-            deform: PreparedMlp::new(&m.deform),
-            cov: PreparedMlp::new(&m.cov),
-            opacity: PreparedMlp::new(&m.opacity),
-            color: PreparedMlp::new(&m.color),
-            lang: m.lang.as_ref().map(PreparedMlp::new),
+            deform: PanelMlp::new(&m.deform),
+            cov: PanelMlp::new(&m.cov),
+            opacity: PanelMlp::new(&m.opacity),
+            color: PanelMlp::new(&m.color),
+            lang: m.lang.as_ref().map(PanelMlp::new),
             scale_offsets: m.scale_offsets,
             geometry: None,
-            gop,
+            features: PlanarFeatures::new(&gop.features),
+            mlps: gop.mlps,
         };
         if model == DeformModel::Reference {
             d.geometry = Some(d.key_geometry(canon));
@@ -119,58 +119,73 @@ impl Deformer {
         d
     }
 
-    /// The time features and decoders this deformer was built from.
-    pub fn gop(&self) -> &DynamicGop {
-        &self.gop
+    /// The time features and decoders this deformer was built from (rebuilt in the file's
+    /// `(N, K, C)` layout).
+    pub fn dynamic_gop(&self) -> DynamicGop {
+        DynamicGop {
+            features: self.features.to_time_features(),
+            mlps: self.mlps.clone(),
+        }
     }
 
-    fn features(&self) -> &TimeFeatures {
-        &self.gop.features
+    fn features(&self) -> &PlanarFeatures {
+        &self.features
     }
 
     fn key_geometry(&self, canon: &Gaussians) -> KeyGeometry {
         let f = self.features();
         let keys = f.keys;
-        let parts: Vec<KeyGeometry> = blocks(f.n)
+        let parts: Vec<KeyGeometry> = block_ranges(f.n)
+            .into_par_iter()
             .map(|rows| {
                 let len = rows.len() * keys;
                 let mut g = KeyGeometry {
                     pos: vec![[0.0; 3]; len],
                     tangent: vec![[0.0; 3]; len],
                     quat: vec![[0.0; 4]; len],
+                    angle: vec![[0.0; 2]; len],
                     dscale: self.scale_offsets.then(|| vec![[0.0; 3]; len]),
                 };
+                let mut scratch = Scratch::default();
+                let mut x = vec![[0.0; PANEL]; 12];
+                let mut o = vec![[0.0; PANEL]; self.deform.outputs()];
+                let mut c = vec![[0.0; PANEL]; self.cov.outputs()];
                 for k in 0..keys {
-                    let x = key_rows(f, rows.clone(), k, 0, 12);
-                    let o = self.deform.run(x.view());
-                    let c = self.cov.run(x.view());
-                    for (r, i) in rows.clone().enumerate() {
-                        let j = r * keys + k;
-                        let (o, c) = (o.row(r), c.row(r));
-                        let p = canon.positions[i];
-                        g.pos[j] = [p[0] + o[0], p[1] + o[1], p[2] + o[2]];
-                        g.tangent[j] = [o[3], o[4], o[5]];
-                        let q = canon.rotations[i];
-                        g.quat[j] =
-                            normalize4([q[0] + c[3], q[1] + c[4], q[2] + c[5], q[3] + c[6]]);
-                        if let Some(ds) = &mut g.dscale {
-                            ds[j] = [c[0], c[1], c[2]];
+                    for p in panels(rows.clone()) {
+                        f.key_panel(p.clone(), k, 0, &mut x);
+                        self.deform.run(&x, &mut scratch, &mut o);
+                        self.cov.run(&x, &mut scratch, &mut c);
+                        for (l, i) in p.enumerate() {
+                            let j = (i - rows.start) * keys + k;
+                            let pc = canon.positions[i];
+                            g.pos[j] = std::array::from_fn(|a| pc[a] + o[a][l]);
+                            g.tangent[j] = std::array::from_fn(|a| o[3 + a][l]);
+                            let q = canon.rotations[i];
+                            g.quat[j] = normalize4(std::array::from_fn(|a| q[a] + c[3 + a][l]));
+                            if let Some(ds) = &mut g.dscale {
+                                ds[j] = std::array::from_fn(|a| c[a][l]);
+                            }
                         }
+                    }
+                }
+                for r in 0..rows.len() {
+                    for k in 0..keys.saturating_sub(1) {
+                        let j = r * keys + k;
+                        g.angle[j] = slerp_angle(g.quat[j], g.quat[j + 1]);
                     }
                 }
                 g
             })
             .collect();
         let mut out = KeyGeometry {
-            pos: Vec::with_capacity(f.n * keys),
-            tangent: Vec::with_capacity(f.n * keys),
-            quat: Vec::with_capacity(f.n * keys),
-            dscale: self.scale_offsets.then(|| Vec::with_capacity(f.n * keys)),
+            dscale: self.scale_offsets.then(Vec::new),
+            ..Default::default()
         };
         for p in parts {
             out.pos.extend(p.pos);
             out.tangent.extend(p.tangent);
             out.quat.extend(p.quat);
+            out.angle.extend(p.angle);
             if let (Some(o), Some(s)) = (&mut out.dscale, p.dscale) {
                 o.extend(s);
             }
@@ -186,137 +201,173 @@ impl Deformer {
         delta: f32,
         opts: &FrameOptions,
     ) -> Gaussians {
-        let language = opts.language && self.lang.is_some() && canon.has_language();
-        let parts: Vec<Gaussians> = blocks(self.features().n)
-            .map(|rows| self.frame_block(canon, rows, key, delta, opts.camera_center, language))
-            .collect();
         let mut out = Gaussians::new(canon.sh_degree, canon.lang_width);
-        for p in &parts {
-            out.extend(p);
-        }
+        self.frame_into(canon, key, delta, opts, &mut out);
         out
     }
 
-    fn frame_block(
+    /// Like [`Self::frame`], reusing `out`'s allocations (a player's frame buffer).
+    pub fn frame_into(
         &self,
         canon: &Gaussians,
-        rows: std::ops::Range<usize>,
+        key: usize,
+        delta: f32,
+        opts: &FrameOptions,
+        out: &mut Gaussians,
+    ) {
+        let n = self.features().n;
+        let language = opts.language && self.lang.is_some() && canon.has_language();
+        out.sh_degree = canon.sh_degree;
+        out.lang_width = canon.lang_width;
+        out.positions.resize(n, [0.0; 3]);
+        out.log_scales.resize(n, [0.0; 3]);
+        out.rotations.resize(n, [0.0; 4]);
+        out.opacity.resize(n, 0.0);
+        out.lang_opacity.resize(canon.lang_opacity.len(), 0.0);
+        out.sh.resize(canon.sh.len(), 0.0);
+        out.lang.resize(canon.lang.len(), 0.0);
+        let blocks = block_ranges(n);
+        let stride = canon.sh_stride();
+        let lw = canon.lang_width;
+        let lo = usize::from(canon.has_language());
+        let mut pos = split_rows(&mut out.positions, 1, &blocks).into_iter();
+        let mut scale = split_rows(&mut out.log_scales, 1, &blocks).into_iter();
+        let mut rot = split_rows(&mut out.rotations, 1, &blocks).into_iter();
+        let mut opacity = split_rows(&mut out.opacity, 1, &blocks).into_iter();
+        let mut lang_opacity = split_rows(&mut out.lang_opacity, lo, &blocks).into_iter();
+        let mut sh = split_rows(&mut out.sh, stride, &blocks).into_iter();
+        let mut lang = split_rows(&mut out.lang, lw, &blocks).into_iter();
+        let jobs: Vec<BlockOut> = blocks
+            .iter()
+            .map(|rows| BlockOut {
+                rows: rows.clone(),
+                pos: pos.next().expect("one slice per block"),
+                scale: scale.next().expect("one slice per block"),
+                rot: rot.next().expect("one slice per block"),
+                opacity: opacity.next().expect("one slice per block"),
+                lang_opacity: lang_opacity.next().expect("one slice per block"),
+                sh: sh.next().expect("one slice per block"),
+                lang: lang.next().expect("one slice per block"),
+            })
+            .collect();
+        jobs.into_par_iter().for_each(|mut b| {
+            self.fill_block(canon, &mut b, key, delta, opts.camera_center, language)
+        });
+    }
+
+    fn fill_block(
+        &self,
+        canon: &Gaussians,
+        out: &mut BlockOut,
         k: usize,
         d: f32,
         cam: [f32; 3],
         language: bool,
-    ) -> Gaussians {
+    ) {
         let f = self.features();
-        let n = rows.len();
-        let mut g = Gaussians::new(canon.sh_degree, canon.lang_width);
-        g.positions.reserve(n);
-        g.log_scales.reserve(n);
-        g.rotations.reserve(n);
+        let rows = out.rows.clone();
+        let stride = canon.sh_stride();
+        let lw = canon.lang_width;
+        // Canonical values that the offsets are added to.
+        out.scale.copy_from_slice(&canon.log_scales[rows.clone()]);
+        out.opacity.copy_from_slice(&canon.opacity[rows.clone()]);
+        out.sh
+            .copy_from_slice(&canon.sh[rows.start * stride..rows.end * stride]);
+        if canon.has_language() {
+            out.lang_opacity
+                .copy_from_slice(&canon.lang_opacity[rows.clone()]);
+            out.lang
+                .copy_from_slice(&canon.lang[rows.start * lw..rows.end * lw]);
+        }
+        let mut scratch = Scratch::default();
+        let mut x = vec![[0.0; PANEL]; 12];
 
         // Geometry.
         match (&self.geometry, self.model) {
             (Some(geo), DeformModel::Reference) => {
                 let keys = f.keys;
-                for i in rows.clone() {
+                for (r, i) in rows.clone().enumerate() {
                     let (a, b) = (i * keys + k, i * keys + k + 1);
-                    g.positions.push(hermite(
-                        geo.pos[a],
-                        geo.tangent[a],
-                        geo.pos[b],
-                        geo.tangent[b],
-                        d,
-                    ));
-                    g.rotations
-                        .push(slerp_reference(geo.quat[a], geo.quat[b], d));
-                    let s = canon.log_scales[i];
-                    g.log_scales.push(match &geo.dscale {
+                    out.pos[r] = hermite(geo.pos[a], geo.tangent[a], geo.pos[b], geo.tangent[b], d);
+                    out.rot[r] = slerp_blend(geo.quat[a], geo.quat[b], geo.angle[a], d);
+                    if let Some(ds) = &geo.dscale {
                         // Key `k` only, no interpolation (the reference's eval path).
-                        Some(ds) => [s[0] + ds[a][0], s[1] + ds[a][1], s[2] + ds[a][2]],
-                        None => s,
-                    });
+                        for c in 0..3 {
+                            out.scale[r][c] += ds[a][c];
+                        }
+                    }
                 }
             }
             _ => {
                 // The paper's plain form: decoders applied to the interpolated feature.
-                let x = lerp_rows(f, rows.clone(), k, d, 0, 12, 0);
-                let o = self.deform.run(x.view());
-                let c = self.cov.run(x.view());
-                for (r, i) in rows.clone().enumerate() {
-                    let (o, c) = (o.row(r), c.row(r));
-                    let p = canon.positions[i];
-                    g.positions.push([p[0] + o[0], p[1] + o[1], p[2] + o[2]]);
-                    let q = canon.rotations[i];
-                    g.rotations.push(normalize4([
-                        q[0] + c[3],
-                        q[1] + c[4],
-                        q[2] + c[5],
-                        q[3] + c[6],
-                    ]));
-                    let s = canon.log_scales[i];
-                    g.log_scales.push(if self.scale_offsets {
-                        [s[0] + c[0], s[1] + c[1], s[2] + c[2]]
-                    } else {
-                        s
-                    });
+                let mut o = vec![[0.0; PANEL]; self.deform.outputs()];
+                let mut c = vec![[0.0; PANEL]; self.cov.outputs()];
+                for p in panels(rows.clone()) {
+                    f.lerp_panel(p.clone(), k, d, 0, &mut x);
+                    self.deform.run(&x, &mut scratch, &mut o);
+                    self.cov.run(&x, &mut scratch, &mut c);
+                    for (l, i) in p.enumerate() {
+                        let r = i - rows.start;
+                        let pc = canon.positions[i];
+                        out.pos[r] = std::array::from_fn(|a| pc[a] + o[a][l]);
+                        let q = canon.rotations[i];
+                        out.rot[r] = normalize4(std::array::from_fn(|a| q[a] + c[3 + a][l]));
+                        if self.scale_offsets {
+                            for a in 0..3 {
+                                out.scale[r][a] += c[a][l];
+                            }
+                        }
+                    }
                 }
             }
         }
 
         // Appearance: lerp(F[4:12]) ‖ view dir ‖ distance, from the canonical position.
-        let mut x = lerp_rows(f, rows.clone(), k, d, 4, 8, 4);
-        for (r, i) in rows.clone().enumerate() {
-            let p = canon.positions[i];
-            let v = [p[0] - cam[0], p[1] - cam[1], p[2] - cam[2]];
-            let dist = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            // The reference divides without an epsilon; a Gaussian exactly at the camera gets
-            // direction 0 here instead of NaN.
-            let inv = if dist > 0.0 { 1.0 / dist } else { 0.0 };
-            let row = x.row_mut(r).into_slice().expect("standard layout");
-            row[8] = v[0] * inv;
-            row[9] = v[1] * inv;
-            row[10] = v[2] * inv;
-            row[11] = dist;
-        }
-        let dop = self.opacity.run(x.view());
-        let dsh = self.color.run(x.view());
-        let stride = canon.sh_stride();
-        g.sh = canon.sh[rows.start * stride..rows.end * stride].to_vec();
-        let m = dsh.ncols().min(stride);
-        for r in 0..n {
-            let dst = &mut g.sh[r * stride..r * stride + m];
-            for (s, v) in dst.iter_mut().zip(dsh.row(r).iter()) {
-                *s += v;
+        let mut dop = vec![[0.0; PANEL]; self.opacity.outputs()];
+        let mut dsh = vec![[0.0; PANEL]; self.color.outputs()];
+        let sh_out = self.color.outputs().min(stride);
+        for p in panels(rows.clone()) {
+            f.lerp_panel(p.clone(), k, d, 4, &mut x[..8]);
+            for (l, i) in p.clone().enumerate() {
+                let pc = canon.positions[i];
+                let v = [pc[0] - cam[0], pc[1] - cam[1], pc[2] - cam[2]];
+                let dist = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                // The reference divides without an epsilon; a Gaussian exactly at the camera
+                // gets direction 0 here instead of NaN.
+                let inv = if dist > 0.0 { 1.0 / dist } else { 0.0 };
+                x[8][l] = v[0] * inv;
+                x[9][l] = v[1] * inv;
+                x[10][l] = v[2] * inv;
+                x[11][l] = dist;
+            }
+            self.opacity.run(&x, &mut scratch, &mut dop);
+            self.color.run(&x, &mut scratch, &mut dsh);
+            for (l, i) in p.enumerate() {
+                let r = i - rows.start;
+                out.opacity[r] += dop[0][l];
+                if canon.has_language() && dop.len() > 1 {
+                    out.lang_opacity[r] += dop[1][l];
+                }
+                let s = &mut out.sh[r * stride..r * stride + sh_out];
+                for (c, v) in s.iter_mut().enumerate() {
+                    *v += dsh[c][l];
+                }
             }
         }
-        g.opacity = rows
-            .clone()
-            .enumerate()
-            .map(|(r, i)| canon.opacity[i] + dop[[r, 0]])
-            .collect();
-        if canon.has_language() {
-            g.lang_opacity = rows
-                .clone()
-                .enumerate()
-                .map(|(r, i)| {
-                    canon.lang_opacity[i] + if dop.ncols() > 1 { dop[[r, 1]] } else { 0.0 }
-                })
-                .collect();
-            let lw = canon.lang_width;
-            g.lang = canon.lang[rows.start * lw..rows.end * lw].to_vec();
-            if language {
-                let y = lerp_rows(f, rows.clone(), k, d, 8, 8, 0);
-                let dl = self.lang.as_ref().expect("checked").run(y.view());
-                add_rows(&mut g.lang, lw, dl.view());
-            }
-        }
-        g
-    }
-}
 
-fn add_rows(dst: &mut [f32], width: usize, delta: ArrayView2<f32>) {
-    for (r, row) in dst.chunks_exact_mut(width).enumerate() {
-        for (s, v) in row.iter_mut().zip(delta.row(r).iter()) {
-            *s += v;
+        if language {
+            let lang = self.lang.as_ref().expect("checked by the caller");
+            let mut dl = vec![[0.0; PANEL]; lang.outputs()];
+            for p in panels(rows.clone()) {
+                f.lerp_panel(p.clone(), k, d, 8, &mut x[..8]);
+                lang.run(&x[..8], &mut scratch, &mut dl);
+                for (l, i) in p.enumerate() {
+                    let r = i - rows.start;
+                    for (c, v) in out.lang[r * lw..(r + 1) * lw].iter_mut().enumerate() {
+                        *v += dl[c][l];
+                    }
+                }
+            }
         }
     }
 }

@@ -21,14 +21,21 @@ pub fn hermite(p0: [f32; 3], m0: [f32; 3], p1: [f32; 3], m1: [f32; 3], d: f32) -
     std::array::from_fn(|a| h00 * p0[a] + h10 * m0[a] + h01 * p1[a] + h11 * m1[a])
 }
 
-/// The reference's `slerp_interpolate` on already normalised inputs: clamped dot, floored
-/// angle and sine, weights renormalised to sum 1, no shortest-arc flip, then normalised.
+/// The angle part of the reference's `slerp_interpolate`: `(ω, sin ω)` with the clamped dot and
+/// floored angle and sine. It depends only on the two keys, so the decoder computes it once per
+/// GOP.
 #[inline]
-pub fn slerp_reference(q0: [f32; 4], q1: [f32; 4], d: f32) -> [f32; 4] {
+pub fn slerp_angle(q0: [f32; 4], q1: [f32; 4]) -> [f32; 2] {
     let dot = (q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3])
         .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
     let omega = dot.acos().max(1e-4);
-    let s = omega.sin().max(1e-4);
+    [omega, omega.sin().max(1e-4)]
+}
+
+/// The blend part of `slerp_interpolate`, given [`slerp_angle`]`(q0, q1)`: weights renormalised
+/// to sum 1, no shortest-arc flip, then normalised.
+#[inline]
+pub fn slerp_blend(q0: [f32; 4], q1: [f32; 4], [omega, s]: [f32; 2], d: f32) -> [f32; 4] {
     let mut p0 = ((1.0 - d) * omega).sin() / s;
     let mut p1 = (d * omega).sin() / s;
     let sum = (p0 + p1).max(1e-4);
@@ -39,6 +46,12 @@ pub fn slerp_reference(q0: [f32; 4], q1: [f32; 4], d: f32) -> [f32; 4] {
         return q0;
     }
     normalize4(r)
+}
+
+/// The reference's `slerp_interpolate` on already normalised inputs.
+#[inline]
+pub fn slerp_reference(q0: [f32; 4], q1: [f32; 4], d: f32) -> [f32; 4] {
+    slerp_blend(q0, q1, slerp_angle(q0, q1), d)
 }
 
 #[inline]

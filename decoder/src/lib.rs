@@ -3,7 +3,8 @@
 
 pub mod deform;
 pub mod interp;
-pub mod mlp;
+pub mod panel;
+pub mod planar;
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek};
@@ -26,9 +27,10 @@ pub struct DecodedGop {
 }
 
 impl DecodedGop {
-    /// The GOP's time features and decoders, if the scene has dynamic Gaussians.
-    pub fn dynamic(&self) -> Option<&DynamicGop> {
-        self.deformer.as_ref().map(Deformer::gop)
+    /// The GOP's time features and decoders, if the scene has dynamic Gaussians (rebuilt from
+    /// the deformer's layout; for re-encoding and inspection, not per frame).
+    pub fn dynamic(&self) -> Option<DynamicGop> {
+        self.deformer.as_ref().map(Deformer::dynamic_gop)
     }
 }
 
@@ -173,16 +175,28 @@ impl<R: Read + Seek> Decoder<R> {
     /// The Gaussians at any time `t` seconds in `[0, duration]`, between frames included:
     /// key features are interpolated at the exact fraction (4D frame interpolation).
     pub fn frame_at(&mut self, t: f64, opts: &FrameOptions) -> Result<Frame> {
+        self.frame_at_reusing(t, opts, Gaussians::default())
+    }
+
+    /// [`Self::frame_at`] writing into the buffers of `reuse` (e.g. the previous frame's
+    /// `dynamics`), so a player allocates nothing per frame.
+    pub fn frame_at_reusing(
+        &mut self,
+        t: f64,
+        opts: &FrameOptions,
+        mut reuse: Gaussians,
+    ) -> Result<Frame> {
         let time = self.scene().locate(t)?;
         let gop = self.gop(time.gop)?;
-        let dynamics = match &gop.deformer {
-            Some(d) => d.frame(&gop.canonical.dynamics, time.key, time.delta, opts),
-            None => gop.canonical.dynamics.clone(),
-        };
+        let canon = &gop.canonical.dynamics;
+        match &gop.deformer {
+            Some(d) => d.frame_into(canon, time.key, time.delta, opts, &mut reuse),
+            None => reuse.clone_from(canon),
+        }
         Ok(Frame {
             time,
             gop,
-            dynamics,
+            dynamics: reuse,
         })
     }
 }

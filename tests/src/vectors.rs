@@ -78,6 +78,12 @@ pub fn all() -> Vec<Vector> {
             about: "a real 1971-Gaussian scene (GaussianSplats3D lod3 tile, MIT)",
         },
     ];
+    v.push(Vector {
+        name: DYNAMIC_VECTOR,
+        bytes: dynamic_vector(&lod3),
+        error: None,
+        about: "2 GOPs of 60 frames, 128 of 512 lod3 Gaussians animated by the synthetic generator (no trained DLGStream model exists here), language, exact TFEA, f32 MLPW; decoded frames in lod3-dynamic.frames.f32",
+    });
     let mut bad = |name, error, about, f: &dyn Fn(&mut Vec<u8>)| {
         let mut b = base.clone();
         f(&mut b);
@@ -185,4 +191,60 @@ pub fn expected_lines(v: &Vector) -> Vec<String> {
         .enumerate()
         .map(|(g, c)| format!("{} {g} {}", v.name, raw_canonical::canonical_digest(c)))
         .collect()
+}
+
+/// The dynamic vector's name; its decoded frames are in `valid/<name>.frames.f32`.
+pub const DYNAMIC_VECTOR: &str = "lod3-dynamic";
+/// Times (seconds) whose frames the vector lists: a key, between keys, between frames, the
+/// first frame of GOP 1, near the end.
+pub const FRAME_TIMES: [f64; 5] = [0.0, 0.5, 1.2345, 2.0, 3.95];
+/// Camera centre for the view-dependent decoders.
+pub const FRAME_CAMERA: [f32; 3] = [0.3, -0.2, -2.5];
+/// Largest absolute difference a conforming decoder may show (format-spec §6.4).
+pub const FRAME_TOLERANCE: f32 = 2e-4;
+
+fn dynamic_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
+    // The first 512 Gaussians keep the file small; 128 of them move.
+    let mut part = dlgs::Gaussians::new(scene.sh_degree, scene.lang_width);
+    for i in 0..512 {
+        part.push_from(scene, i);
+    }
+    let spec = SynthSpec {
+        dynamic_fraction: 0.25,
+        max_dynamic: 128,
+        gops: 2,
+        language: true,
+        ..Default::default()
+    };
+    let m = synth_dynamic(&part, &spec).unwrap();
+    let cfg = dlgs_encoder::EncoderConfig {
+        features: dlgs_encoder::FeatureCodec::Exact,
+        ..Default::default()
+    };
+    write_model(&m, cfg, Vec::new()).unwrap()
+}
+
+/// The dynamic Gaussians of `bytes` at [`FRAME_TIMES`], language on, as f32 little-endian:
+/// per time, the arrays positions, log-scales, rotations, opacity, language opacity, SH,
+/// language, each over all dynamic Gaussians (layout in vectors/README.md).
+pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
+    let mut dec =
+        dlgs_decoder::Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    let opts = dlgs_decoder::FrameOptions {
+        camera_center: FRAME_CAMERA,
+        language: true,
+    };
+    let mut out = Vec::new();
+    for t in FRAME_TIMES {
+        let g = dec.frame_at(t, &opts).unwrap().dynamics;
+        out.extend(g.positions.iter().flatten());
+        out.extend(g.log_scales.iter().flatten());
+        out.extend(g.rotations.iter().flatten());
+        out.extend(&g.opacity);
+        out.extend(&g.lang_opacity);
+        out.extend(&g.sh);
+        out.extend(&g.lang);
+    }
+    out
 }

@@ -74,3 +74,28 @@ fn committed_vectors_equal_what_the_generator_builds() {
         );
     }
 }
+
+#[test]
+fn dynamic_vector_decodes_to_the_listed_frames() {
+    let name = vectors::DYNAMIC_VECTOR;
+    let bytes = std::fs::read(root().join("valid").join(format!("{name}.dlgs"))).unwrap();
+    let want: Vec<f32> = std::fs::read(root().join("valid").join(format!("{name}.frames.f32")))
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    let got = vectors::dynamic_frames(&bytes);
+    // 128 dynamic Gaussians x (3+3+4+1+1+48+9) values x 5 times.
+    assert_eq!(got.len(), 128 * 69 * vectors::FRAME_TIMES.len());
+    assert_eq!(got.len(), want.len());
+    let worst = got
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    println!("{name}: max |decoded - listed| = {worst:e}");
+    assert!(worst <= vectors::FRAME_TOLERANCE, "{worst}");
+    // The frames move: the listed times are not all the same frame.
+    let per_time = want.len() / vectors::FRAME_TIMES.len();
+    assert!(want[..per_time] != want[per_time..2 * per_time]);
+}

@@ -128,7 +128,7 @@ fn exact_features_round_trip_bit_for_bit() {
 fn feature_error_table(m: &SynthModel, bytes: &[u8]) -> (f32, f32) {
     let mut dec = open(bytes);
     let d = dec.gop(0).unwrap();
-    let got = &d.dynamic().unwrap().features;
+    let got = d.dynamic().unwrap().features;
     let want = &m.gops[0].features;
     let ranges = time_features::ranges(want, false);
     let (mut worst_max, mut worst_mean) = (0f32, 0f32);
@@ -163,13 +163,13 @@ fn hevc_lossless_is_exactly_the_12_bit_quantisation() {
     );
     let mut dec = open(&bytes);
     let gop = dec.gop(0).unwrap();
-    let got = &gop.dynamic().unwrap().features;
+    let got = gop.dynamic().unwrap().features;
     let f = &m.gops[0].features;
     let t = Tiling::for_count(f.n, f.keys, f.channels);
     let r = time_features::ranges(f, false);
     let want = time_features::untile(&time_features::tile(f, &t, &r), &t, &r);
     assert_eq!(
-        got, &want,
+        &got, &want,
         "lossless HEVC must reproduce the 12-bit samples"
     );
     let (max, _) = feature_error_table(&m, &bytes);

@@ -18,6 +18,17 @@ fn main() {
             "valid"
         };
         std::fs::write(root.join(dir).join(format!("{}.dlgs", v.name)), &v.bytes).unwrap();
+        if v.name == dlgs_tests::vectors::DYNAMIC_VECTOR {
+            let frames: Vec<u8> = dlgs_tests::vectors::dynamic_frames(&v.bytes)
+                .iter()
+                .flat_map(|x| x.to_le_bytes())
+                .collect();
+            std::fs::write(
+                root.join(dir).join(format!("{}.frames.f32", v.name)),
+                frames,
+            )
+            .unwrap();
+        }
         match v.error {
             None => {
                 for l in dlgs_tests::vectors::expected_lines(&v) {
@@ -37,6 +48,19 @@ fn main() {
     }
     std::fs::write(root.join("expected.txt"), expected).unwrap();
     std::fs::write(root.join("expected-errors.txt"), errors).unwrap();
+    readme.push_str(&format!(
+        "\n## Dynamic frames\n\n`valid/{name}.frames.f32` holds what a decoder must produce for `valid/{name}.dlgs` \
+(format-spec/dlgs.md §6.4): the dynamic Gaussians at t = {times:?} s, camera centre {cam:?}, language decoded. \
+All values are f32 little-endian; per time, in this order, each array over all N dynamic Gaussians in file order: \
+position (3 per Gaussian), log-scale (3), raw quaternion w x y z (4), colour opacity before the sigmoid (1), \
+language opacity (1), SH coefficients (48, coefficient-major), language feature (9). \
+A decoder conforms if every value is within {tol} of the file's (absolute); the platform's `sin`/`acos` make \
+the last bits differ between platforms.\n",
+        name = dlgs_tests::vectors::DYNAMIC_VECTOR,
+        times = dlgs_tests::vectors::FRAME_TIMES,
+        cam = dlgs_tests::vectors::FRAME_CAMERA,
+        tol = dlgs_tests::vectors::FRAME_TOLERANCE,
+    ));
     std::fs::write(root.join("README.md"), readme).unwrap();
     println!("wrote {}", root.display());
 }

@@ -1,0 +1,113 @@
+//! Time features re-laid out key- and channel-major, `(K, C, N)`, for the decoder's panels:
+//! the 16 rows of a panel at one key and channel are 16 consecutive floats, so building a
+//! panel is a vector load and a frame reads only the channels its decoders use, as sequential
+//! streams the hardware prefetcher follows. (The file and the reference keep `(N, K, C)`.)
+
+use std::ops::Range;
+
+use dlgs::model::TimeFeatures;
+
+use crate::interp::lerp;
+use crate::panel::{Lane, PANEL};
+
+#[derive(Debug, Clone)]
+pub struct PlanarFeatures {
+    pub n: usize,
+    pub keys: usize,
+    pub channels: usize,
+    /// `data[(k * channels + c) * n + i]`.
+    data: Vec<f32>,
+}
+
+impl PlanarFeatures {
+    pub fn new(f: &TimeFeatures) -> Self {
+        let (n, keys, ch) = (f.n, f.keys, f.channels);
+        let mut data = vec![0f32; f.data.len()];
+        for (i, row) in f.data.chunks_exact(keys * ch).enumerate() {
+            for (kc, &v) in row.iter().enumerate() {
+                data[kc * n + i] = v;
+            }
+        }
+        PlanarFeatures {
+            n,
+            keys,
+            channels: ch,
+            data,
+        }
+    }
+
+    /// Back to the file's `(N, K, C)` layout.
+    pub fn to_time_features(&self) -> TimeFeatures {
+        let (n, kc) = (self.n, self.keys * self.channels);
+        let mut f = TimeFeatures::zeros(n, self.keys, self.channels);
+        for (i, row) in f.data.chunks_exact_mut(kc).enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = self.data[j * n + i];
+            }
+        }
+        f
+    }
+
+    fn column(&self, k: usize, c: usize, rows: Range<usize>) -> &[f32] {
+        let o = (k * self.channels + c) * self.n;
+        &self.data[o + rows.start..o + rows.end]
+    }
+
+    /// Panel columns `x[j] = lerp(F_k, F_k+1, δ)[c0 + j]` over `rows` (zero past the end).
+    pub fn lerp_panel(&self, rows: Range<usize>, k: usize, d: f32, c0: usize, x: &mut [Lane]) {
+        for (j, lane) in x.iter_mut().enumerate() {
+            let a = self.column(k, c0 + j, rows.clone());
+            let b = self.column(k + 1, c0 + j, rows.clone());
+            match (<&Lane>::try_from(a), <&Lane>::try_from(b)) {
+                (Ok(a), Ok(b)) => *lane = std::array::from_fn(|l| lerp(a[l], b[l], d)),
+                _ => {
+                    *lane = [0.0; PANEL];
+                    for ((o, &a), &b) in lane.iter_mut().zip(a).zip(b) {
+                        *o = lerp(a, b, d);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Panel columns `x[j] = F_k[c0 + j]` over `rows` (zero past the end).
+    pub fn key_panel(&self, rows: Range<usize>, k: usize, c0: usize, x: &mut [Lane]) {
+        for (j, lane) in x.iter_mut().enumerate() {
+            *lane = [0.0; PANEL];
+            let a = self.column(k, c0 + j, rows.clone());
+            lane[..a.len()].copy_from_slice(a);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layouts_round_trip_and_panels_read_the_right_values() {
+        let mut f = TimeFeatures::zeros(37, 3, 5);
+        for (j, v) in f.data.iter_mut().enumerate() {
+            *v = j as f32 * 0.25 - 3.0;
+        }
+        let p = PlanarFeatures::new(&f);
+        assert_eq!(p.to_time_features(), f);
+        let mut x = vec![[0.0; PANEL]; 3];
+        for rows in [0..16, 16..32, 32..37] {
+            p.lerp_panel(rows.clone(), 1, 0.25, 2, &mut x);
+            for (l, i) in rows.clone().enumerate() {
+                for j in 0..3 {
+                    let want = lerp(f.at(i, 1)[2 + j], f.at(i, 2)[2 + j], 0.25);
+                    assert_eq!(x[j][l], want);
+                }
+            }
+            for l in rows.len()..PANEL {
+                assert_eq!(x[0][l], 0.0);
+            }
+            p.key_panel(rows.clone(), 2, 1, &mut x);
+            for (l, i) in rows.enumerate() {
+                assert_eq!(x[2][l], f.at(i, 2)[3]);
+            }
+        }
+    }
+}
