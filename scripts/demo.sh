@@ -25,6 +25,14 @@ bytes=$(stat -c %s "$OUT/scene.dlgs")
 n=$($B info "$OUT/scene.dlgs" --json | python3 -c 'import json,sys; h=json.load(sys.stdin)["header"]; print(h["n_static"]+h["n_dynamic"])')
 echo "RD summary: $bytes bytes/frame, $(python3 -c "print(f'{$bytes*8/$n:.1f}')") bits/Gaussian (PSNR above; inf = lossless)"
 echo
+echo "== canonical compression (CSOG: sorted quantised grids), three presets"
+for q in high medium low; do
+  $B encode "$SCENE" -o "$OUT/scene-$q.dlgs" --quality $q > /dev/null
+  b=$(stat -c %s "$OUT/scene-$q.dlgs")
+  psnr=$($B compare "$SCENE" "$OUT/scene-$q.dlgs" --orbit 8 --width 676 --height 507 --json | python3 -c 'import json,sys; print("%.2f" % json.load(sys.stdin)["mean_psnr"])')
+  echo "RD $q: $b bytes, $(python3 -c "print(f'{$b*8/$n:.1f}')") bits/Gaussian, mean PSNR $psnr dB"
+done
+echo
 echo "== dynamic: SYNTHETIC motion on the real plant scene (no trained DLGStream model exists here)"
 PLANT="$DATA/splat/marcelpadilla_plant.splat"
 $B synth "$PLANT" -o "$OUT/dynamic_exact.dlgs" --exact-features --language

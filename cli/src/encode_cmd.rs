@@ -7,9 +7,12 @@ use clap::Args;
 use dlgs::container::header::DeformModel;
 use dlgs::payload::mlp_weights::WeightType;
 use dlgs::payload::raw_canonical::RawCodec;
+use dlgs::payload::sorted_grid::QuantBits;
 use dlgs_decoder::Decoder;
 use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
-use dlgs_encoder::{EncoderConfig, FeatureCodec, HevcSettings, StreamEncoder};
+use dlgs_encoder::{
+    CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, SortSpec, StreamEncoder,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::scene_io::is_dlgs;
@@ -17,6 +20,19 @@ use crate::scene_io::is_dlgs;
 /// Encoder settings shared by `encode` and `synth`.
 #[derive(Args, Debug, Clone)]
 pub struct CodecArgs {
+    /// Canonical Gaussians: `lossless` (f32, CRAW) or sorted quantised grids (CSOG) at preset
+    /// `high`, `medium` or `low` (format-spec §6.5; bits per attribute in `dlgs encode --help`).
+    #[arg(long, default_value = "lossless")]
+    pub quality: String,
+    /// Override quantisation bits, e.g. `position=15,sh_rest=5` (keys: position, log_scale,
+    /// rotation, opacity, sh_dc, sh_rest, lang). Implies grid coding (preset `high` if
+    /// `--quality lossless`).
+    #[arg(long)]
+    pub bits: Option<String>,
+    /// Grid sort refinement passes per radius: 0 = k-d layout only (fastest), 1 = fast,
+    /// 3 = default; more passes give smoother grids (smaller files) for more encode time.
+    #[arg(long, default_value_t = 3)]
+    pub sort_passes: u32,
     /// Store raw canonical floats without zstd.
     #[arg(long)]
     pub no_zstd: bool,
@@ -44,8 +60,47 @@ pub struct CodecArgs {
 }
 
 impl CodecArgs {
-    pub fn config(&self, meta: serde_json::Value) -> EncoderConfig {
-        EncoderConfig {
+    fn canonical(&self) -> Result<CanonicalCodec> {
+        let mut bits = match (self.quality.as_str(), &self.bits) {
+            ("lossless", None) => return Ok(CanonicalCodec::Raw),
+            ("lossless", Some(_)) => QuantBits::HIGH,
+            (q, _) => QuantBits::preset(q).with_context(|| {
+                format!("--quality {q}: expected lossless, high, medium or low")
+            })?,
+        };
+        if let Some(spec) = &self.bits {
+            for kv in spec.split(',').filter(|s| !s.is_empty()) {
+                let (k, v) = kv
+                    .split_once('=')
+                    .with_context(|| format!("--bits: `{kv}` is not key=value"))?;
+                let v: u8 = v
+                    .parse()
+                    .ok()
+                    .filter(|b| (1..=16).contains(b))
+                    .with_context(|| format!("--bits {k}: `{v}` is not 1..=16"))?;
+                match k {
+                    "position" => bits.position = v,
+                    "log_scale" => bits.log_scale = v,
+                    "rotation" => bits.rotation = v,
+                    "opacity" => bits.opacity = v,
+                    "sh_dc" => bits.sh_dc = v,
+                    "sh_rest" => bits.sh_rest = v,
+                    "lang" => bits.lang = v,
+                    _ => bail!("--bits: unknown attribute `{k}`"),
+                }
+            }
+        }
+        Ok(CanonicalCodec::Sorted {
+            bits,
+            sort: SortSpec {
+                passes: self.sort_passes,
+            },
+        })
+    }
+
+    pub fn config(&self, meta: serde_json::Value) -> Result<EncoderConfig> {
+        Ok(EncoderConfig {
+            canonical: self.canonical()?,
             raw_codec: if self.no_zstd {
                 RawCodec::None
             } else {
@@ -68,7 +123,7 @@ impl CodecArgs {
             } else {
                 WeightType::F32
             },
-        }
+        })
     }
 }
 
@@ -111,7 +166,7 @@ pub fn run_encode(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> 
     if !is_dlgs(input) {
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
-        dlgs_encoder::encode_still(&g, codec.config(meta(input, settings)), out)?;
+        dlgs_encoder::encode_still(&g, codec.config(meta(input, settings))?, out)?;
         println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
         return report(input, output, 1);
     }
@@ -119,7 +174,7 @@ pub fn run_encode(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> 
     let mut dec =
         Decoder::open_path(input).with_context(|| format!("opening {}", input.display()))?;
     let scene = dec.scene().clone();
-    let mut enc = StreamEncoder::new(out, scene.clone(), codec.config(meta(input, settings)))?;
+    let mut enc = StreamEncoder::new(out, scene.clone(), codec.config(meta(input, settings))?)?;
     let pb = bar(scene.gop_count as u64, "encoding");
     for g in 0..scene.gop_count {
         let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;
@@ -202,7 +257,7 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
     let mut enc = StreamEncoder::new(
         std::io::BufWriter::new(f),
         model.scene.clone(),
-        a.codec.config(m),
+        a.codec.config(m)?,
     )?;
     for (i, d) in model.gops.iter().enumerate() {
         enc.push_gop(&model.canonical, Some(d))

@@ -14,7 +14,7 @@ use std::sync::Arc;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
 use dlgs::payload::time_features::{self, TfeaBody};
-use dlgs::payload::{mlp_weights, raw_canonical};
+use dlgs::payload::{mlp_weights, raw_canonical, sorted_grid};
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
@@ -118,15 +118,15 @@ impl<R: Read + Seek> Decoder<R> {
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        let craw = Self::find(&chunks, ChunkType::CRAW)
-            .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
-        let p = self.reader.payload(&craw)?;
-        let canonical = Arc::new(raw_canonical::decode(
-            &p,
-            craw.payload_offset(),
-            &scene,
-            &limits,
-        )?);
+        let canonical = Arc::new(if let Some(c) = Self::find(&chunks, ChunkType::CSOG) {
+            let p = self.reader.payload(&c)?;
+            sorted_grid::decode(&p, c.payload_offset(), &scene, &limits)?
+        } else {
+            let craw = Self::find(&chunks, ChunkType::CRAW)
+                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
+            let p = self.reader.payload(&craw)?;
+            raw_canonical::decode(&p, craw.payload_offset(), &scene, &limits)?
+        });
         let mut dynamic = None;
         if scene.n_dynamic > 0 {
             let tfea = Self::find(&chunks, ChunkType::TFEA)

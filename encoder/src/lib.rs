@@ -1,9 +1,10 @@
 //! `dlgs-encoder`: turns scene models into `.dlgs` streams.
 //!
-//! It writes intra GOPs: raw canonical Gaussians (`CRAW`) and, for dynamic scenes, the key
-//! time features (`TFEA`, 12-bit HEVC or exact) and the deformation decoders (`MLPW`).
-//! Compressed canonical and residual stages plug in here as their issues land.
+//! It writes intra GOPs: canonical Gaussians (raw `CRAW`, or sorted quantised grids `CSOG`)
+//! and, for dynamic scenes, the key time features (`TFEA`, 12-bit HEVC or exact) and the
+//! deformation decoders (`MLPW`). Residual stages plug in here as their issues land.
 
+pub mod grid_sort;
 pub mod synth;
 
 use std::io::Write;
@@ -12,6 +13,7 @@ use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
 use dlgs::model::DynamicGop;
 use dlgs::payload::mlp_weights::{self, WeightType};
 use dlgs::payload::raw_canonical::{self, RawCodec};
+use dlgs::payload::sorted_grid::{self, QuantBits};
 use dlgs::payload::time_features::{self, TfeaBody, Tiling};
 use dlgs::{Canonical, Error, ErrorKind, Result};
 pub use dlgs_video::HevcSettings;
@@ -25,9 +27,23 @@ pub enum FeatureCodec {
     Hevc(HevcSettings),
 }
 
+/// How canonical Gaussians are stored.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CanonicalCodec {
+    /// `CRAW`: f32, lossless (zstd or not, see `raw_codec`).
+    Raw,
+    /// `CSOG`: the static set sorted into a grid, every attribute quantised to `bits` and coded
+    /// losslessly. The dynamic set keeps its order (its time features are tied to it).
+    Sorted { bits: QuantBits, sort: SortSpec },
+}
+
+pub use grid_sort::SortSpec;
+
 /// Encoder settings.
 #[derive(Debug, Clone)]
 pub struct EncoderConfig {
+    /// Canonical Gaussians: raw or sorted quantised grids.
+    pub canonical: CanonicalCodec,
     /// How `CRAW` bodies are stored.
     pub raw_codec: RawCodec,
     /// zstd level for `CRAW` when `raw_codec` is zstd (1..=22).
@@ -45,6 +61,7 @@ pub struct EncoderConfig {
 impl Default for EncoderConfig {
     fn default() -> Self {
         EncoderConfig {
+            canonical: CanonicalCodec::Raw,
             raw_codec: RawCodec::Zstd,
             zstd_level: 9,
             meta: None,
@@ -117,10 +134,25 @@ impl<W: Write> StreamEncoder<W> {
                 ))
             }
         };
-        let payload = raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?;
+        let (ty, payload) = match self.cfg.canonical {
+            CanonicalCodec::Raw => (
+                ChunkType::CRAW,
+                raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?,
+            ),
+            CanonicalCodec::Sorted { bits, sort } => {
+                let order = grid_sort::grid_order(&canon.statics, sort);
+                let sorted = Canonical {
+                    statics: grid_sort::permute(&canon.statics, &order),
+                    dynamics: canon.dynamics.clone(),
+                };
+                (
+                    ChunkType::CSOG,
+                    sorted_grid::encode(&sorted, &bits, self.cfg.zstd_level)?,
+                )
+            }
+        };
         self.writer.begin_gop()?;
-        self.writer
-            .gop_chunk(ChunkType::CRAW, FLAG_MUST_UNDERSTAND, &payload)?;
+        self.writer.gop_chunk(ty, FLAG_MUST_UNDERSTAND, &payload)?;
         if let Some((tfea, mlpw)) = dyn_chunks {
             self.writer
                 .gop_chunk(ChunkType::TFEA, FLAG_MUST_UNDERSTAND, &tfea)?;

@@ -20,6 +20,8 @@ impl ChunkType {
     pub const CRAW: ChunkType = ChunkType(*b"CRAW");
     pub const TFEA: ChunkType = ChunkType(*b"TFEA");
     pub const MLPW: ChunkType = ChunkType(*b"MLPW");
+    /// Canonical Gaussians as quantised, sorted attribute grids, §6.5.
+    pub const CSOG: ChunkType = ChunkType(*b"CSOG");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes

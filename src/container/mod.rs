@@ -25,6 +25,7 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::CRAW,
     ChunkType::TFEA,
     ChunkType::MLPW,
+    ChunkType::CSOG,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

@@ -79,6 +79,12 @@ pub fn all() -> Vec<Vector> {
         },
     ];
     v.push(Vector {
+        name: "lod3-csog-medium",
+        bytes: csog_still(&lod3),
+        error: None,
+        about: "the lod3 scene as sorted quantised grids (CSOG, preset medium, default sort)",
+    });
+    v.push(Vector {
         name: DYNAMIC_VECTOR,
         bytes: dynamic_vector(&lod3),
         error: None,
@@ -247,4 +253,16 @@ pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
         out.extend(&g.lang);
     }
     out
+}
+
+fn csog_still(g: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
+    let cfg = EncoderConfig {
+        canonical: CanonicalCodec::Sorted {
+            bits: dlgs::payload::sorted_grid::QuantBits::MEDIUM,
+            sort: SortSpec::DEFAULT,
+        },
+        ..Default::default()
+    };
+    dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()
 }

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Canonical compression side by side on every real scene (issue 5, BENCHMARKS.md): raw PLY,
+# SPZ v4 and PlayCanvas SOG v2 (from scripts/peers.sh), and dlgs CSOG at high/medium/low.
+# Rendered PSNR/SSIM against the uncompressed scene from 8 orbit cameras (dlgs compare).
+# Usage: bash scripts/canonical_rd.sh [PEERS_DIR]  (run scripts/peers.sh PEERS_DIR first)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PEERS=${1:-target/peers}
+DATA=${DLGS_DATA:-../shared/data}
+OUT=target/canonical_rd
+mkdir -p "$OUT"
+cargo build --release -q -p dlgs-cli -p dlgs-decoder --example decode_timing
+DLGS=target/release/dlgs
+export RUST_BACKTRACE=0
+metric() { $DLGS compare "$1" "$2" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f | %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
+echo "| scene | N | format | bytes | bits/G | % of SOG | PSNR dB | SSIM | encode s | decode ms |"
+echo "|---|---|---|---|---|---|---|---|---|---|"
+for s in ply/gs3d-fork_lod3_tile_0_1971_sh3.ply ply/supersplat_fruit_drops_minimal_4721_sh3.ply \
+         ply/gs3d-fork_lod2_tile_0_6831_sh3.ply ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply \
+         ply/gsplat_DATA_new_22589_sh3.ply ply/v3dg_donut_mipsplatting_45624_sh0.ply \
+         splat/marcelpadilla_plant.splat; do
+  src="$DATA/$s"; name=$(basename "${s%.*}")
+  # Gaussian counts from ../shared/data/MANIFEST.md.
+  case "$name" in
+    *lod3*) n=1971 ;; *fruit*) n=4721 ;; *lod2*) n=6831 ;; *lod1*) n=14051 ;;
+    gsplat*) n=22589 ;; *donut*) n=45624 ;; *plant*) n=113648 ;;
+  esac
+  sog=$(awk -F'\t' -v n="$name" '$1==n && $2=="sog" {print $3}' "$PEERS/times.tsv")
+  row() { # format bytes psnr|ssim enc dec
+    printf '| %s | %s | %s | %s | %.1f | %.0f %% | %s | %s | %s |\n' "$name" "$n" "$1" "$2" \
+      "$(echo "$2 * 8 / $n" | bc -l)" "$(echo "100 * $2 / $sog" | bc -l)" "$3" "$4" "$5"
+  }
+  row "source file" "$(stat -c %s "$src")" "inf | 1.0000" "-" "-"
+  for fmt in spz sog; do
+    enc=$(awk -F'\t' -v n="$name" -v f="$fmt" '$1==n && $2==f {print $4}' "$PEERS/times.tsv")
+    row "$fmt" "$(stat -c %s "$PEERS/$name.$fmt")" "$(metric "$src" "$PEERS/$name.$fmt.ply")" "$enc" "-"
+  done
+  for q in high medium low; do
+    f="$OUT/$name-$q.dlgs"
+    start=$(date +%s.%N); $DLGS encode "$src" -o "$f" --quality "$q" > /dev/null; end=$(date +%s.%N)
+    dec=$(target/release/examples/decode_timing "$f" 5 | grep -o 'median [0-9.]*' | cut -d' ' -f2)
+    row "dlgs $q" "$(stat -c %s "$f")" "$(metric "$src" "$f")" "$(printf '%.2f' "$(echo "$end - $start" | bc)")" "$dec"
+  done
+done

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Convert every real scene of ../shared/data with the peer formats, for the canonical compression
+# comparison (BENCHMARKS.md): PlayCanvas SOG v2 and SPZ v4, both with
+# `@playcanvas/splat-transform` 2.7.1 (npm), CPU only, then back to PLY so our renderer can
+# measure them. Output: $OUT/<scene>.{sog,spz}, $OUT/<scene>.{sog,spz}.ply, $OUT/times.tsv.
+# Usage: bash scripts/peers.sh [OUT]   (default target/peers; needs node/npx)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-target/peers}
+DATA=${DLGS_DATA:-../shared/data}
+mkdir -p "$OUT"
+ST=(npx -y @playcanvas/splat-transform@2.7.1)
+SCENES=(
+  ply/gs3d-fork_lod3_tile_0_1971_sh3.ply
+  ply/supersplat_fruit_drops_minimal_4721_sh3.ply
+  ply/gs3d-fork_lod2_tile_0_6831_sh3.ply
+  ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply
+  ply/gsplat_DATA_new_22589_sh3.ply
+  ply/v3dg_donut_mipsplatting_45624_sh0.ply
+  splat/marcelpadilla_plant.splat
+)
+printf 'scene\tformat\tbytes\tencode_s\n' > "$OUT/times.tsv"
+for s in "${SCENES[@]}"; do
+  name=$(basename "${s%.*}")
+  for fmt in spz sog; do
+    out="$OUT/$name.$fmt"
+    start=$(date +%s.%N)
+    # SOG's SH palette k-means runs on the CPU here (no GPU): slow for SH 3 scenes.
+    extra=()
+    [ "$fmt" = sog ] && extra=(-g cpu)
+    "${ST[@]}" -q -w "${extra[@]}" "$DATA/$s" "$out"
+    end=$(date +%s.%N)
+    printf '%s\t%s\t%s\t%.1f\n' "$name" "$fmt" "$(stat -c %s "$out")" "$(echo "$end - $start" | bc)" >> "$OUT/times.tsv"
+    "${ST[@]}" -q -w "$out" "$out.ply"
+  done
+done
+cat "$OUT/times.tsv"

@@ -1,0 +1,429 @@
+//! Lossless coding of one quantised attribute channel laid out as a sorted 2D grid
+//! (format-spec §6.5.3). Cell `i` is at column `i % width`, row `i / width`; the last row may be
+//! partial. The predictive codec is LOCO-I's median edge detector on the grid neighbours, the
+//! residual taken modulo `2^bits`, zigzag-mapped, split into a magnitude class (range-coded
+//! with `constriction`, one static model per activity context) and raw mantissa bits (packed
+//! with `bitvec`).
+
+use bitvec::prelude::*;
+use constriction::stream::model::ContiguousCategoricalEntropyModel;
+use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
+use constriction::stream::{Decode, Encode};
+
+use crate::bytes::{ByteReader, PutLe};
+use crate::error::{ErrorKind, Result};
+
+/// Probability precision of the class models (probabilities are stored as u16 < 2^12).
+pub const PRECISION: usize = 12;
+/// Activity contexts.
+pub const CONTEXTS: usize = 3;
+type Model = ContiguousCategoricalEntropyModel<u32, Vec<u32>, PRECISION>;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridCodec {
+    /// Every cell is 0 (no data).
+    Constant = 0,
+    /// Values as u8 (bits <= 8) or u16 LE, zstd-compressed.
+    Zstd = 1,
+    /// Median predictor + context-modelled range coding.
+    Predictive = 2,
+}
+
+impl GridCodec {
+    pub fn from_u8(v: u8) -> Option<Self> {
+        match v {
+            0 => Some(GridCodec::Constant),
+            1 => Some(GridCodec::Zstd),
+            2 => Some(GridCodec::Predictive),
+            _ => None,
+        }
+    }
+}
+
+/// Left, up and up-left neighbours of cell `i` (0 where absent) and whether each exists.
+#[inline]
+fn neighbours(q: &[u16], i: usize, width: usize) -> (u16, u16, u16, bool, bool) {
+    let (x, y) = (i % width, i / width);
+    let a = if x > 0 { q[i - 1] } else { 0 };
+    let b = if y > 0 { q[i - width] } else { 0 };
+    let c = if x > 0 && y > 0 { q[i - width - 1] } else { 0 };
+    (a, b, c, x > 0, y > 0)
+}
+
+/// Median edge detector; the first row predicts from the left, the first column from above.
+#[inline]
+fn predict(a: u16, b: u16, c: u16, has_a: bool, has_b: bool) -> u16 {
+    match (has_a, has_b) {
+        (true, true) => {
+            let (lo, hi) = (a.min(b), a.max(b));
+            if c >= hi {
+                lo
+            } else if c <= lo {
+                hi
+            } else {
+                (a as i32 + b as i32 - c as i32) as u16
+            }
+        }
+        (true, false) => a,
+        (false, true) => b,
+        (false, false) => 0,
+    }
+}
+
+/// Bit length of `v` (0 for 0).
+#[inline]
+fn class_of(v: u32) -> u32 {
+    32 - v.leading_zeros()
+}
+
+#[inline]
+fn context(a: u16, b: u16, c: u16, t0: u32) -> usize {
+    let act = (a as i32 - c as i32).unsigned_abs()
+        + (b as i32 - c as i32).unsigned_abs()
+        + (a as i32 - b as i32).unsigned_abs();
+    let k = class_of(act);
+    if k <= t0 {
+        0
+    } else if k <= t0 + 2 {
+        1
+    } else {
+        2
+    }
+}
+
+/// Residual `q - pred` modulo `2^bits`, as a signed value in `[-2^(bits-1), 2^(bits-1))`,
+/// zigzag-mapped to `[0, 2^bits)`.
+#[inline]
+fn zigzag(q: u16, pred: u16, bits: u8) -> u32 {
+    let m = 1i32 << bits;
+    let mut r = (q as i32 - pred as i32).rem_euclid(m);
+    if r >= m / 2 {
+        r -= m;
+    }
+    ((r << 1) ^ (r >> 31)) as u32
+}
+
+#[inline]
+fn unzigzag(z: u32, pred: u16, bits: u8) -> u16 {
+    let r = ((z >> 1) as i32) ^ -((z & 1) as i32);
+    (pred as i32 + r).rem_euclid(1 << bits) as u16
+}
+
+/// Normalise counts to `2^PRECISION` with every symbol at least 1 (largest absorbs rounding).
+fn normalise(counts: &[u64]) -> Vec<u32> {
+    let total: u64 = counts.iter().sum::<u64>().max(1);
+    let one = 1u64 << PRECISION;
+    let mut p: Vec<u32> = counts
+        .iter()
+        .map(|&c| ((c * one) / total).max(1) as u32)
+        .collect();
+    let sum: i64 = p.iter().map(|&v| v as i64).sum();
+    let (imax, _) = p
+        .iter()
+        .enumerate()
+        .max_by_key(|&(i, v)| (*v, std::cmp::Reverse(i)))
+        .expect("non-empty");
+    p[imax] = (p[imax] as i64 + one as i64 - sum) as u32;
+    p
+}
+
+fn model(p: &[u32]) -> Option<Model> {
+    Model::from_nonzero_fixed_point_probabilities(p, false).ok()
+}
+
+/// Encode with the predictive codec.
+pub fn encode_predictive(q: &[u16], width: usize, bits: u8) -> Vec<u8> {
+    // Context threshold: the median activity class, so the three contexts split the cells.
+    let mut hist = [0u64; 34];
+    for i in 0..q.len() {
+        let (a, b, c, ..) = neighbours(q, i, width);
+        let act = (a as i32 - c as i32).unsigned_abs()
+            + (b as i32 - c as i32).unsigned_abs()
+            + (a as i32 - b as i32).unsigned_abs();
+        hist[class_of(act) as usize] += 1;
+    }
+    let mut acc = 0;
+    let t0 = hist
+        .iter()
+        .position(|&h| {
+            acc += h;
+            acc * 2 >= q.len() as u64
+        })
+        .unwrap_or(0) as u32;
+
+    let symbols: Vec<(usize, u32, u32)> = (0..q.len())
+        .map(|i| {
+            let (a, b, c, ha, hb) = neighbours(q, i, width);
+            let z = zigzag(q[i], predict(a, b, c, ha, hb), bits);
+            (context(a, b, c, t0), class_of(z), z)
+        })
+        .collect();
+    let mut counts = vec![vec![0u64; bits as usize + 1]; CONTEXTS];
+    for &(ctx, cl, _) in &symbols {
+        counts[ctx][cl as usize] += 1;
+    }
+    let mut out = vec![t0 as u8];
+    let mut models = Vec::with_capacity(CONTEXTS);
+    for c in &counts {
+        // Classes up to the largest used one; an unused context stores 0 classes.
+        let n = c.iter().rposition(|&v| v > 0).map_or(0, |p| p + 1);
+        out.push(n as u8);
+        if n == 0 {
+            models.push(None);
+            continue;
+        }
+        let p = normalise(&c[..n]);
+        for &v in &p {
+            out.put_u16(v as u16);
+        }
+        models.push(model(&p));
+    }
+    let mut enc = DefaultRangeEncoder::new();
+    let mut mantissa: BitVec<u8, Lsb0> = BitVec::new();
+    for &(ctx, cl, z) in &symbols {
+        let m = models[ctx]
+            .as_ref()
+            .expect("context with symbols has a model");
+        enc.encode_symbol(cl as usize, m)
+            .expect("class is inside the model");
+        if cl >= 2 {
+            let extra = z - (1 << (cl - 1));
+            for k in 0..cl - 1 {
+                mantissa.push(extra >> k & 1 == 1);
+            }
+        }
+    }
+    let words = enc.into_compressed().expect("in-memory backend");
+    out.put_u32(words.len() as u32);
+    for w in &words {
+        out.put_u32(*w);
+    }
+    out.extend_from_slice(mantissa.as_raw_slice());
+    out
+}
+
+fn bad(r: &ByteReader, reason: String) -> crate::Error {
+    r.err(ErrorKind::Payload {
+        chunk: crate::container::ChunkType::CSOG,
+        reason,
+    })
+}
+
+/// Decode `n` cells coded with [`encode_predictive`]. `r` holds exactly the channel's bytes.
+pub fn decode_predictive(mut r: ByteReader, n: usize, width: usize, bits: u8) -> Result<Vec<u16>> {
+    let t0 = r.u8("grid context threshold")? as u32;
+    let mut models = Vec::with_capacity(CONTEXTS);
+    for _ in 0..CONTEXTS {
+        let k = r.u8("grid class count")? as usize;
+        if k > bits as usize + 1 {
+            return Err(bad(
+                &r,
+                format!("{k} magnitude classes for {bits}-bit values"),
+            ));
+        }
+        if k == 0 {
+            models.push(None);
+            continue;
+        }
+        let mut p = Vec::with_capacity(k);
+        for _ in 0..k {
+            p.push(r.u16("grid class probability")? as u32);
+        }
+        if p.contains(&0) || p.iter().sum::<u32>() != 1 << PRECISION {
+            return Err(bad(
+                &r,
+                "class probabilities must be >= 1 and sum to 4096".into(),
+            ));
+        }
+        models.push(Some(
+            model(&p).ok_or_else(|| bad(&r, "invalid class model".into()))?,
+        ));
+    }
+    let nwords = r.u32("range coder word count")? as usize;
+    let raw = r.take(
+        nwords
+            .checked_mul(4)
+            .ok_or_else(|| bad(&r, "word count overflows".into()))?,
+        "range coder words",
+    )?;
+    let words: Vec<u32> = raw
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect();
+    let at = r.offset();
+    let mantissa = BitSlice::<u8, Lsb0>::from_slice(r.rest());
+    let mut mpos = 0usize;
+    let mut dec = DefaultRangeDecoder::from_compressed(words)
+        .map_err(|_| bad(&r, "range coder stream".into()))?;
+    let mut q = vec![0u16; n];
+    for i in 0..n {
+        let (a, b, c, ha, hb) = neighbours(&q, i, width);
+        let ctx = context(a, b, c, t0);
+        let m = models[ctx].as_ref().ok_or_else(|| {
+            bad(
+                &r,
+                format!("cell {i} falls in context {ctx}, which has no model"),
+            )
+        })?;
+        let cl = dec
+            .decode_symbol(m)
+            .map_err(|_| bad(&r, format!("range coder failed at cell {i}")))?
+            as u32;
+        let z = if cl >= 2 {
+            let nb = (cl - 1) as usize;
+            let Some(bits_) = mantissa.get(mpos..mpos + nb) else {
+                return Err(crate::Error::new(
+                    ErrorKind::Truncated {
+                        what: "grid mantissa bits",
+                        needed: (mpos + nb).div_ceil(8) as u64,
+                        available: (mantissa.len() / 8) as u64,
+                    },
+                    at,
+                ));
+            };
+            mpos += nb;
+            let extra = bits_
+                .iter()
+                .by_vals()
+                .enumerate()
+                .fold(0u32, |v, (k, b)| v | (b as u32) << k);
+            (1 << (cl - 1)) + extra
+        } else {
+            cl
+        };
+        q[i] = unzigzag(z, predict(a, b, c, ha, hb), bits);
+    }
+    Ok(q)
+}
+
+/// Encode with whichever codec is smaller for this channel.
+pub fn encode_best(q: &[u16], width: usize, bits: u8, zstd_level: i32) -> (GridCodec, Vec<u8>) {
+    if q.iter().all(|&v| v == 0) {
+        return (GridCodec::Constant, Vec::new());
+    }
+    let p = encode_predictive(q, width, bits);
+    let z = encode_zstd(q, bits, zstd_level);
+    if z.len() < p.len() {
+        (GridCodec::Zstd, z)
+    } else {
+        (GridCodec::Predictive, p)
+    }
+}
+
+pub fn encode_zstd(q: &[u16], bits: u8, level: i32) -> Vec<u8> {
+    let raw: Vec<u8> = if bits <= 8 {
+        q.iter().map(|&v| v as u8).collect()
+    } else {
+        q.iter().flat_map(|v| v.to_le_bytes()).collect()
+    };
+    zstd::bulk::compress(&raw, level).expect("zstd compression of a memory buffer")
+}
+
+/// Decode one channel of `n` cells; every value is checked to be below `2^bits`.
+pub fn decode(
+    codec: GridCodec,
+    r: ByteReader,
+    n: usize,
+    width: usize,
+    bits: u8,
+) -> Result<Vec<u16>> {
+    let at = r.offset();
+    let q = match codec {
+        GridCodec::Constant => vec![0u16; n],
+        GridCodec::Predictive => decode_predictive(r, n, width, bits)?,
+        GridCodec::Zstd => {
+            let mut r = r;
+            let per = if bits <= 8 { 1 } else { 2 };
+            let raw = crate::bytes::zstd_exact(r.rest(), (n * per) as u64, at)?;
+            if per == 1 {
+                raw.into_iter().map(u16::from).collect()
+            } else {
+                raw.chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect()
+            }
+        }
+    };
+    if let Some(i) = q.iter().position(|&v| (v as u32) >> bits != 0) {
+        return Err(crate::Error::new(
+            ErrorKind::Payload {
+                chunk: crate::container::ChunkType::CSOG,
+                reason: format!("cell {i} holds {} which does not fit {bits} bits", q[i]),
+            },
+            at,
+        ));
+    }
+    Ok(q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn round_trip(q: &[u16], width: usize, bits: u8) -> usize {
+        let e = encode_predictive(q, width, bits);
+        let d = decode_predictive(ByteReader::new(&e, 0), q.len(), width, bits).unwrap();
+        assert_eq!(d, q);
+        let (codec, b) = encode_best(q, width, bits, 3);
+        assert_eq!(
+            decode(codec, ByteReader::new(&b, 0), q.len(), width, bits).unwrap(),
+            q
+        );
+        e.len()
+    }
+
+    #[test]
+    fn smooth_noisy_extreme_and_partial_grids_round_trip() {
+        let mut s = 1u32;
+        let mut rnd = || {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            s >> 8
+        };
+        for bits in [1u8, 2, 5, 8, 12, 16] {
+            let max = (1u32 << bits) - 1;
+            for (w, n) in [(1, 7), (7, 1), (13, 160), (64, 64 * 64), (50, 2477)] {
+                let smooth: Vec<u16> = (0..n)
+                    .map(|i| (((i % w) * 3 + (i / w) * 2) as u32 % (max + 1)) as u16)
+                    .collect();
+                round_trip(&smooth, w, bits);
+                let noise: Vec<u16> = (0..n).map(|_| (rnd() & max) as u16).collect();
+                round_trip(&noise, w, bits);
+                let ext: Vec<u16> = (0..n)
+                    .map(|i| if i % 3 == 0 { max as u16 } else { 0 })
+                    .collect();
+                round_trip(&ext, w, bits);
+            }
+        }
+    }
+
+    #[test]
+    fn smooth_grids_cost_little() {
+        let w = 128;
+        let q: Vec<u16> = (0..w * w)
+            .map(|i| {
+                (((i % w) as f32 * 0.05).sin() * 2000.0 + 30000.0 + (i / w) as f32 * 3.0) as u16
+            })
+            .collect();
+        let bytes = round_trip(&q, w, 16);
+        // 16 bits raw; a smooth field must cost a small fraction.
+        assert!(
+            bytes * 8 < q.len() * 4,
+            "{} bits per cell",
+            bytes as f32 * 8.0 / q.len() as f32
+        );
+    }
+
+    #[test]
+    fn damaged_streams_give_errors_not_panics() {
+        let q: Vec<u16> = (0..500).map(|i| ((i * 37) % 4096) as u16).collect();
+        let e = encode_predictive(&q, 25, 12);
+        for cut in 0..e.len() {
+            let _ = decode_predictive(ByteReader::new(&e[..cut], 0), q.len(), 25, 12);
+        }
+        for i in 0..e.len() {
+            let mut b = e.clone();
+            b[i] ^= 0x5a;
+            let _ = decode_predictive(ByteReader::new(&b, 0), q.len(), 25, 12);
+        }
+    }
+}

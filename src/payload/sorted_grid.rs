@@ -1,0 +1,540 @@
+//! `CSOG`: canonical Gaussians as quantised attribute grids (format-spec §6.5). The encoder
+//! sorts each set so that grid neighbours are similar (`dlgs-encoder`'s grid sort); this module
+//! only quantises, lays every channel out as a `width`-wide grid in set order and codes it
+//! losslessly with [`grid_coder`]. Decoding restores the quantised values exactly.
+
+use rayon::prelude::*;
+
+use crate::bytes::{ByteReader, PutLe};
+use crate::container::{ChunkType, SceneHeader};
+use crate::error::{Error, ErrorKind, Result};
+use crate::limits::Limits;
+use crate::model::{Canonical, Gaussians};
+use crate::payload::grid_coder::{self, GridCodec};
+
+/// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct QuantBits {
+    pub position: u8,
+    pub log_scale: u8,
+    /// Each of the three smallest quaternion components.
+    pub rotation: u8,
+    /// Colour and language opacity, after the sigmoid.
+    pub opacity: u8,
+    pub sh_dc: u8,
+    pub sh_rest: u8,
+    pub lang: u8,
+}
+
+impl QuantBits {
+    pub const HIGH: QuantBits = QuantBits {
+        position: 14,
+        log_scale: 8,
+        rotation: 9,
+        opacity: 8,
+        sh_dc: 8,
+        sh_rest: 6,
+        lang: 8,
+    };
+    pub const MEDIUM: QuantBits = QuantBits {
+        position: 13,
+        log_scale: 7,
+        rotation: 8,
+        opacity: 7,
+        sh_dc: 7,
+        sh_rest: 5,
+        lang: 7,
+    };
+    pub const LOW: QuantBits = QuantBits {
+        position: 12,
+        log_scale: 6,
+        rotation: 7,
+        opacity: 6,
+        sh_dc: 6,
+        sh_rest: 4,
+        lang: 6,
+    };
+    pub fn preset(name: &str) -> Option<QuantBits> {
+        match name {
+            "high" => Some(Self::HIGH),
+            "medium" => Some(Self::MEDIUM),
+            "low" => Some(Self::LOW),
+            _ => None,
+        }
+    }
+    fn all(&self) -> [u8; 7] {
+        [
+            self.position,
+            self.log_scale,
+            self.rotation,
+            self.opacity,
+            self.sh_dc,
+            self.sh_rest,
+            self.lang,
+        ]
+    }
+}
+
+/// What a channel holds, in payload order (§6.5.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Position(usize),
+    LogScale(usize),
+    RotIndex,
+    Rotation(usize),
+    Opacity,
+    Sh(usize),
+    LangOpacity,
+    Lang(usize),
+}
+
+fn channels(g: &Gaussians) -> Vec<Kind> {
+    let mut k: Vec<Kind> = (0..3).map(Kind::Position).collect();
+    k.extend((0..3).map(Kind::LogScale));
+    k.push(Kind::RotIndex);
+    k.extend((0..3).map(Kind::Rotation));
+    k.push(Kind::Opacity);
+    k.extend((0..g.sh_stride()).map(Kind::Sh));
+    if g.has_language() {
+        k.push(Kind::LangOpacity);
+        k.extend((0..g.lang_width).map(Kind::Lang));
+    }
+    k
+}
+
+impl Kind {
+    fn bits(self, b: &QuantBits) -> u8 {
+        match self {
+            Kind::Position(_) => b.position,
+            Kind::LogScale(_) => b.log_scale,
+            Kind::RotIndex => 2,
+            Kind::Rotation(_) => b.rotation,
+            Kind::Opacity | Kind::LangOpacity => b.opacity,
+            Kind::Sh(j) if j < 3 => b.sh_dc,
+            Kind::Sh(_) => b.sh_rest,
+            Kind::Lang(_) => b.lang,
+        }
+    }
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Normalised quaternion, identity for a zero one, sign so the largest |component| is positive;
+/// returns (index of the largest, the other three in order).
+fn smallest_three(q: [f32; 4]) -> (usize, [f32; 3]) {
+    let n = (q.iter().map(|v| v * v).sum::<f32>()).sqrt();
+    let q = if n > 0.0 && n.is_finite() {
+        q.map(|v| v / n)
+    } else {
+        [1.0, 0.0, 0.0, 0.0]
+    };
+    let m = (0..4)
+        .max_by(|&a, &b| q[a].abs().total_cmp(&q[b].abs()).then(b.cmp(&a)))
+        .expect("four components");
+    let s = if q[m] < 0.0 { -1.0 } else { 1.0 };
+    let mut rest = [0.0; 3];
+    let mut j = 0;
+    for (i, v) in q.iter().enumerate() {
+        if i != m {
+            rest[j] = v * s;
+            j += 1;
+        }
+    }
+    (m, rest)
+}
+
+/// The channel's values before quantisation.
+fn values(g: &Gaussians, k: Kind) -> Vec<f32> {
+    let n = g.len();
+    match k {
+        Kind::Position(a) => g.positions.iter().map(|p| p[a]).collect(),
+        Kind::LogScale(a) => g.log_scales.iter().map(|p| p[a]).collect(),
+        Kind::RotIndex => g
+            .rotations
+            .iter()
+            .map(|&q| smallest_three(q).0 as f32)
+            .collect(),
+        Kind::Rotation(a) => g
+            .rotations
+            .iter()
+            .map(|&q| smallest_three(q).1[a])
+            .collect(),
+        Kind::Opacity => g.opacity.iter().map(|&o| sigmoid(o)).collect(),
+        Kind::LangOpacity => g.lang_opacity.iter().map(|&o| sigmoid(o)).collect(),
+        Kind::Sh(j) => (0..n).map(|i| g.sh[i * g.sh_stride() + j]).collect(),
+        Kind::Lang(j) => (0..n).map(|i| g.lang[i * g.lang_width + j]).collect(),
+    }
+}
+
+/// Quantisation range: fixed for opacities, rotation components and the index; the data's
+/// min/max otherwise.
+fn range(k: Kind, v: &[f32]) -> (f32, f32) {
+    match k {
+        Kind::Opacity | Kind::LangOpacity => (0.0, 1.0),
+        Kind::Rotation(_) => (
+            -std::f32::consts::FRAC_1_SQRT_2,
+            std::f32::consts::FRAC_1_SQRT_2,
+        ),
+        Kind::RotIndex => (0.0, 3.0),
+        _ if v.is_empty() => (0.0, 0.0),
+        _ => v
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            }),
+    }
+}
+
+fn levels(bits: u8) -> f32 {
+    ((1u32 << bits) - 1) as f32
+}
+
+/// `q = round((v - min) / (max - min) * (2^bits - 1))`, clamped; 0 when the range is empty.
+pub fn quantise(v: f32, min: f32, max: f32, bits: u8) -> u16 {
+    if !(max > min) {
+        return 0;
+    }
+    let t = ((v - min) / (max - min) * levels(bits)).round();
+    t.clamp(0.0, levels(bits)) as u16
+}
+
+/// `v = min + q * ((max - min) / (2^bits - 1))` in f32 (§6.5.2).
+pub fn dequantise(q: u16, min: f32, max: f32, bits: u8) -> f32 {
+    min + q as f32 * ((max - min) / levels(bits))
+}
+
+/// Grid width for `n` cells: `ceil(sqrt(n))` (0 for an empty set).
+pub fn grid_width(n: usize) -> usize {
+    if n == 0 {
+        return 0;
+    }
+    let mut w = (n as f64).sqrt() as usize;
+    while w * w < n {
+        w += 1;
+    }
+    w
+}
+
+/// One channel as stored.
+struct Channel {
+    bits: u8,
+    min: f32,
+    max: f32,
+    codec: GridCodec,
+    data: Vec<u8>,
+}
+
+/// A set's quantised channels in payload order: bits, range, cells.
+pub struct QuantisedSet {
+    pub channels: Vec<(u8, f32, f32, Vec<u16>)>,
+}
+
+/// Quantise every channel of a set (for the encoder, tests and tools).
+pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
+    let channels = channels(g)
+        .into_par_iter()
+        .map(|k| {
+            let v = values(g, k);
+            let b = k.bits(bits);
+            let (lo, hi) = range(k, &v);
+            (
+                b,
+                lo,
+                hi,
+                v.iter().map(|&x| quantise(x, lo, hi, b)).collect(),
+            )
+        })
+        .collect();
+    QuantisedSet { channels }
+}
+
+fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i32) {
+    let w = grid_width(g.len());
+    let qs = quantise_set(g, bits);
+    let chans: Vec<Channel> = qs
+        .channels
+        .into_par_iter()
+        .map(|(b, min, max, q)| {
+            let (codec, data) = grid_coder::encode_best(&q, w.max(1), b, zstd_level);
+            Channel {
+                bits: b,
+                min,
+                max,
+                codec,
+                data,
+            }
+        })
+        .collect();
+    out.put_u32(w as u32);
+    out.put_u16(chans.len() as u16);
+    for c in chans {
+        out.put_u8(c.bits);
+        out.put_u8(c.codec as u8);
+        out.put_f32(c.min);
+        out.put_f32(c.max);
+        out.put_u32(c.data.len() as u32);
+        out.extend_from_slice(&c.data);
+    }
+}
+
+/// Coded bytes per attribute group of one set, for reports: (group name, bytes).
+pub fn breakdown(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<(&'static str, usize)> {
+    let w = grid_width(g.len()).max(1);
+    let kinds = channels(g);
+    let qs = quantise_set(g, bits);
+    let sizes: Vec<usize> = qs
+        .channels
+        .into_par_iter()
+        .map(|(b, _, _, q)| grid_coder::encode_best(&q, w, b, zstd_level).1.len() + 14)
+        .collect();
+    let mut out: Vec<(&'static str, usize)> = Vec::new();
+    for (k, s) in kinds.iter().zip(sizes) {
+        let name = match k {
+            Kind::Position(_) => "position",
+            Kind::LogScale(_) => "log_scale",
+            Kind::RotIndex | Kind::Rotation(_) => "rotation",
+            Kind::Opacity => "opacity",
+            Kind::Sh(j) if *j < 3 => "sh_dc",
+            Kind::Sh(_) => "sh_rest",
+            Kind::LangOpacity => "lang_opacity",
+            Kind::Lang(_) => "lang",
+        };
+        match out.last_mut() {
+            Some((n, total)) if *n == name => *total += s,
+            _ => out.push((name, s)),
+        }
+    }
+    out
+}
+
+/// Encode a canonical GOP. Sets are stored in the order given (sort them first).
+pub fn encode(c: &Canonical, bits: &QuantBits, zstd_level: i32) -> Result<Vec<u8>> {
+    let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
+    for &b in &bits.all() {
+        if !(1..=16).contains(&b) {
+            return Err(bad(format!("quantisation bits must be 1..=16, got {b}")));
+        }
+    }
+    c.statics.check_shapes()?;
+    c.dynamics.check_shapes()?;
+    c.statics.check_finite()?;
+    c.dynamics.check_finite()?;
+    let mut out = vec![0u8]; // layout version
+    encode_set(&mut out, &c.statics, bits, zstd_level);
+    encode_set(&mut out, &c.dynamics, bits, zstd_level);
+    Ok(out)
+}
+
+fn bad_at(reason: String, at: u64) -> Error {
+    Error::new(
+        ErrorKind::Payload {
+            chunk: ChunkType::CSOG,
+            reason,
+        },
+        at,
+    )
+}
+
+fn decode_set(
+    r: &mut ByteReader,
+    n: usize,
+    sh_degree: u8,
+    lang_width: usize,
+    limits: &Limits,
+) -> Result<Gaussians> {
+    let mut g = Gaussians::new(sh_degree, lang_width);
+    let kinds = channels(&g);
+    let at = r.offset();
+    let w = r.u32("CSOG grid width")? as usize;
+    if w != grid_width(n) {
+        return Err(bad_at(
+            format!(
+                "grid width {w} for {n} Gaussians, expected {}",
+                grid_width(n)
+            ),
+            at,
+        ));
+    }
+    let at = r.offset();
+    let count = r.u16("CSOG channel count")? as usize;
+    if count != kinds.len() {
+        return Err(bad_at(
+            format!("{count} channels, the layout has {}", kinds.len()),
+            at,
+        ));
+    }
+    limits.check_alloc(
+        "CSOG channel cells",
+        (n as u64) * 2 * kinds.len() as u64,
+        at,
+    )?;
+    let mut stored = Vec::with_capacity(kinds.len());
+    for &k in &kinds {
+        let at = r.offset();
+        let bits = r.u8("CSOG channel bits")?;
+        let is_index = k == Kind::RotIndex;
+        if !(1..=16).contains(&bits) || (is_index && bits != 2) {
+            return Err(bad_at(format!("{k:?}: {bits} bits"), at));
+        }
+        let at = r.offset();
+        let codec = GridCodec::from_u8(r.u8("CSOG channel codec")?)
+            .ok_or_else(|| bad_at("unknown grid codec".into(), at))?;
+        let at = r.offset();
+        let (min, max) = (
+            r.finite_f32("CSOG channel min")?,
+            r.finite_f32("CSOG channel max")?,
+        );
+        if is_index && (min, max) != (0.0, 3.0) {
+            return Err(bad_at(
+                "rotation index channel must have range [0, 3]".into(),
+                at,
+            ));
+        }
+        let len = r.u32("CSOG channel length")? as usize;
+        let at = r.offset();
+        let data = r.take(len, "CSOG channel data")?;
+        stored.push((k, bits, codec, min, max, data, at));
+    }
+    let decoded: Vec<(u8, Vec<f32>)> = stored
+        .into_par_iter()
+        .map(|(k, bits, codec, min, max, data, at)| {
+            let q = grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits)?;
+            let v = match k {
+                Kind::RotIndex => q.iter().map(|&v| v as f32).collect(),
+                _ => q.iter().map(|&v| dequantise(v, min, max, bits)).collect(),
+            };
+            Ok((bits, v))
+        })
+        .collect::<Result<_>>()?;
+    let mut ch = decoded.into_iter();
+    let mut next = || ch.next().expect("one decoded channel per kind");
+    let zip3 = |a: Vec<f32>, b: Vec<f32>, c: Vec<f32>| -> Vec<[f32; 3]> {
+        (0..n).map(|i| [a[i], b[i], c[i]]).collect()
+    };
+    g.positions = zip3(next().1, next().1, next().1);
+    g.log_scales = zip3(next().1, next().1, next().1);
+    let idx = next().1;
+    let rest = zip3(next().1, next().1, next().1);
+    g.rotations = (0..n)
+        .map(|i| {
+            let r = rest[i];
+            let big = (1.0 - (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]))
+                .max(0.0)
+                .sqrt();
+            let m = idx[i] as usize;
+            let mut q = [0.0; 4];
+            let mut j = 0;
+            for (a, v) in q.iter_mut().enumerate() {
+                if a == m {
+                    *v = big;
+                } else {
+                    *v = r[j];
+                    j += 1;
+                }
+            }
+            q
+        })
+        .collect();
+    let (ob, o) = next();
+    g.opacity = logit(o, ob);
+    let stride = g.sh_stride();
+    let sh: Vec<Vec<f32>> = (0..stride).map(|_| next().1).collect();
+    g.sh = (0..n * stride)
+        .map(|x| sh[x % stride][x / stride])
+        .collect();
+    if lang_width > 0 {
+        let (lb, lo) = next();
+        g.lang_opacity = logit(lo, lb);
+        let l: Vec<Vec<f32>> = (0..lang_width).map(|_| next().1).collect();
+        g.lang = (0..n * lang_width)
+            .map(|x| l[x % lang_width][x / lang_width])
+            .collect();
+    }
+    Ok(g)
+}
+
+/// Back to pre-sigmoid opacity; alpha is kept half a step away from 0 and 1 so the logit is
+/// finite (§6.5.2).
+fn logit(alpha: Vec<f32>, bits: u8) -> Vec<f32> {
+    let eps = 0.5 / levels(bits);
+    alpha
+        .into_iter()
+        .map(|a| {
+            let a = a.clamp(eps, 1.0 - eps);
+            (a / (1.0 - a)).ln()
+        })
+        .collect()
+}
+
+/// Decode a `CSOG` payload that starts at absolute `offset`, checking it against the scene.
+pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<Canonical> {
+    let mut r = ByteReader::new(p, offset);
+    let at = r.offset();
+    let version = r.u8("CSOG layout version")?;
+    if version != 0 {
+        return Err(bad_at(
+            format!("layout version {version} (this reader knows 0)"),
+            at,
+        ));
+    }
+    let (sh, lw) = (scene.sh_degree, scene.lang_width());
+    let statics = decode_set(&mut r, scene.n_static as usize, sh, lw, limits)?;
+    let dynamics = decode_set(&mut r, scene.n_dynamic as usize, sh, lw, limits)?;
+    if r.remaining() != 0 {
+        return Err(bad_at(
+            format!("{} bytes after the last channel", r.remaining()),
+            r.offset(),
+        ));
+    }
+    Ok(Canonical { statics, dynamics })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternions_survive_smallest_three() {
+        for q in [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0],
+            [-0.2, 0.9, -0.3, 0.1],
+            [0.5, -0.5, 0.5, -0.5],
+            [0.0, 0.0, -3.0, 0.0],
+        ] {
+            let (m, r) = smallest_three(q);
+            assert!(r
+                .iter()
+                .all(|v| v.abs() <= std::f32::consts::FRAC_1_SQRT_2 + 1e-6));
+            let big = (1.0 - r.iter().map(|v| v * v).sum::<f32>()).sqrt();
+            let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+            if n > 0.0 {
+                // Same rotation up to sign.
+                let mut back = [0.0; 4];
+                let mut j = 0;
+                for a in 0..4 {
+                    back[a] = if a == m {
+                        big
+                    } else {
+                        j += 1;
+                        r[j - 1]
+                    };
+                }
+                let dot: f32 = back.iter().zip(q).map(|(a, b)| a * b / n).sum();
+                assert!((dot.abs() - 1.0).abs() < 1e-5, "{q:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn quantisation_hits_ends_and_constant_ranges() {
+        assert_eq!(quantise(-1.0, -1.0, 3.0, 8), 0);
+        assert_eq!(quantise(3.0, -1.0, 3.0, 8), 255);
+        assert_eq!(dequantise(255, -1.0, 3.0, 8), 3.0);
+        assert_eq!(quantise(5.0, 2.0, 2.0, 8), 0);
+        assert_eq!(dequantise(0, 2.0, 2.0, 8), 2.0);
+        assert_eq!(quantise(1e30, 0.0, 1.0, 16), 65535);
+    }
+}
