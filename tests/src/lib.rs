@@ -138,6 +138,14 @@ pub fn decode_all_stream(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec
                     &limits,
                 )?);
             }
+            StreamEvent::GopChunk(c, p) if c.ty == ChunkType::CSOG => {
+                out.push(dlgs::payload::sorted_grid::decode(
+                    &p,
+                    c.payload_offset(),
+                    &scene,
+                    &limits,
+                )?);
+            }
             StreamEvent::End(_) => ended = true,
             _ => {}
         }
