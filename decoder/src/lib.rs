@@ -14,7 +14,7 @@ use std::sync::Arc;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
 use dlgs::payload::time_features::{self, TfeaBody};
-use dlgs::payload::{mlp_weights, raw_canonical, sorted_grid};
+use dlgs::payload::{decode_canonical, mlp_weights, CANONICAL_CHUNKS};
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
@@ -118,15 +118,21 @@ impl<R: Read + Seek> Decoder<R> {
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        let canonical = Arc::new(if let Some(c) = Self::find(&chunks, ChunkType::CSOG) {
-            let p = self.reader.payload(&c)?;
-            sorted_grid::decode(&p, c.payload_offset(), &scene, &limits)?
-        } else {
-            let craw = Self::find(&chunks, ChunkType::CRAW)
-                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
-            let p = self.reader.payload(&craw)?;
-            raw_canonical::decode(&p, craw.payload_offset(), &scene, &limits)?
-        });
+        let canon_chunk = CANONICAL_CHUNKS
+            .iter()
+            .find_map(|&ty| Self::find(&chunks, ty))
+            .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
+        let p = self.reader.payload(&canon_chunk)?;
+        let canonical = Arc::new(
+            decode_canonical(
+                canon_chunk.ty,
+                &p,
+                canon_chunk.payload_offset(),
+                &scene,
+                &limits,
+            )
+            .expect("a canonical chunk type")?,
+        );
         let mut dynamic = None;
         if scene.n_dynamic > 0 {
             let tfea = Self::find(&chunks, ChunkType::TFEA)

@@ -1,6 +1,7 @@
-//! In-order stream reader, decoding every CRAW payload it yields, with tiny limits.
+//! In-order stream reader, decoding every canonical payload (CRAW, CSOG) it yields, with tiny
+//! limits.
 #![no_main]
-use dlgs::container::{ChunkType, StreamEvent, StreamReader};
+use dlgs::container::{StreamEvent, StreamReader};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
@@ -9,9 +10,7 @@ fuzz_target!(|data: &[u8]| {
     let scene = r.scene().clone();
     while let Ok(Some(ev)) = r.next_event() {
         if let StreamEvent::GopChunk(c, p) = ev {
-            if c.ty == ChunkType::CRAW {
-                let _ = dlgs::payload::raw_canonical::decode(&p, c.payload_offset(), &scene, &limits);
-            }
+            let _ = dlgs::payload::decode_canonical(c.ty, &p, c.payload_offset(), &scene, &limits);
         }
     }
 });

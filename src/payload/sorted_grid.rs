@@ -250,14 +250,14 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
     QuantisedSet { channels }
 }
 
-fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i32) {
-    let w = grid_width(g.len());
-    let qs = quantise_set(g, bits);
-    let chans: Vec<Channel> = qs
+/// Quantise and code every channel of a set, in payload order.
+fn code_set(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<Channel> {
+    let w = grid_width(g.len()).max(1);
+    quantise_set(g, bits)
         .channels
         .into_par_iter()
         .map(|(b, min, max, q)| {
-            let (codec, data) = grid_coder::encode_best(&q, w.max(1), b, zstd_level);
+            let (codec, data) = grid_coder::encode_best(&q, w, b, zstd_level);
             Channel {
                 bits: b,
                 min,
@@ -266,8 +266,15 @@ fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i3
                 data,
             }
         })
-        .collect();
-    out.put_u32(w as u32);
+        .collect()
+}
+
+/// Bytes of a channel record before its data: bits, codec, min, max, len (§6.5.2).
+const CHANNEL_HEADER_LEN: usize = 14;
+
+fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i32) {
+    let chans = code_set(g, bits, zstd_level);
+    out.put_u32(grid_width(g.len()) as u32);
     out.put_u16(chans.len() as u16);
     for c in chans {
         out.put_u8(c.bits);
@@ -281,14 +288,10 @@ fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i3
 
 /// Coded bytes per attribute group of one set, for reports: (group name, bytes).
 pub fn breakdown(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<(&'static str, usize)> {
-    let w = grid_width(g.len()).max(1);
     let kinds = channels(g);
-    let qs = quantise_set(g, bits);
-    let sizes: Vec<usize> = qs
-        .channels
-        .into_par_iter()
-        .map(|(b, _, _, q)| grid_coder::encode_best(&q, w, b, zstd_level).1.len() + 14)
-        .collect();
+    let sizes = code_set(g, bits, zstd_level)
+        .into_iter()
+        .map(|c| c.data.len() + CHANNEL_HEADER_LEN);
     let mut out: Vec<(&'static str, usize)> = Vec::new();
     for (k, s) in kinds.iter().zip(sizes) {
         let name = match k {

@@ -123,28 +123,19 @@ pub fn decode_all_random(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec
 
 /// Decode every GOP through the in-order stream reader.
 pub fn decode_all_stream(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec<dlgs::Canonical>> {
-    use dlgs::container::{ChunkType, StreamEvent, StreamReader};
+    use dlgs::container::{StreamEvent, StreamReader};
     let mut r = StreamReader::with_limits(bytes, limits)?;
     let scene = r.scene().clone();
     let mut out = Vec::new();
     let mut ended = false;
     while let Some(ev) = r.next_event()? {
         match ev {
-            StreamEvent::GopChunk(c, p) if c.ty == ChunkType::CRAW => {
-                out.push(dlgs::payload::raw_canonical::decode(
-                    &p,
-                    c.payload_offset(),
-                    &scene,
-                    &limits,
-                )?);
-            }
-            StreamEvent::GopChunk(c, p) if c.ty == ChunkType::CSOG => {
-                out.push(dlgs::payload::sorted_grid::decode(
-                    &p,
-                    c.payload_offset(),
-                    &scene,
-                    &limits,
-                )?);
+            StreamEvent::GopChunk(c, p) => {
+                if let Some(g) =
+                    dlgs::payload::decode_canonical(c.ty, &p, c.payload_offset(), &scene, &limits)
+                {
+                    out.push(g?);
+                }
             }
             StreamEvent::End(_) => ended = true,
             _ => {}
