@@ -4,14 +4,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use dlgs::container::header::DeformModel;
+use dlgs::container::header::{DeformModel, ResidualMode};
+use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs::payload::mlp_weights::WeightType;
 use dlgs::payload::raw_canonical::RawCodec;
 use dlgs::payload::sorted_grid::QuantBits;
 use dlgs_decoder::Decoder;
 use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
 use dlgs_encoder::{
-    CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, SortSpec, StreamEncoder,
+    CanonicalCodec, EncoderConfig, FeatureCodec, GopCanonical, HevcSettings, ResidualConfig,
+    SortSpec, StreamEncoder,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -57,6 +59,21 @@ pub struct CodecArgs {
     /// Store MLP weights as f16 (default f32).
     #[arg(long)]
     pub mlp_f16: bool,
+    /// Error bounds of explicit residuals (RDLT) per attribute group, e.g.
+    /// `position=1e-4,sh_rest=0.01,lang=exact` (groups: position, log_scale, rotation, sh_dc,
+    /// sh_rest, opacity, lang_opacity, lang). Unlisted groups are exact (bit-identical).
+    #[arg(long)]
+    pub residual_error: Option<String>,
+}
+
+/// `intra`, `sequential` or `parallel` (format-spec §4.1).
+pub fn parse_residual_mode(s: &str) -> Result<ResidualMode> {
+    Ok(match s {
+        "intra" => ResidualMode::Intra,
+        "sequential" => ResidualMode::Sequential,
+        "parallel" => ResidualMode::Parallel,
+        _ => bail!("residual mode `{s}`: expected intra, sequential or parallel"),
+    })
 }
 
 impl CodecArgs {
@@ -98,6 +115,39 @@ impl CodecArgs {
         })
     }
 
+    fn residual(&self) -> Result<ResidualConfig> {
+        let mut cfg = ResidualConfig::default();
+        for kv in self
+            .residual_error
+            .as_deref()
+            .unwrap_or("")
+            .split(',')
+            .filter(|s| !s.is_empty())
+        {
+            let (k, v) = kv
+                .split_once('=')
+                .with_context(|| format!("--residual-error: `{kv}` is not group=bound"))?;
+            let group = AttrGroup::from_name(k)
+                .with_context(|| format!("--residual-error: unknown group `{k}`"))?;
+            let target = if v == "exact" {
+                DeltaTarget::Exact
+            } else {
+                let b: f32 = v
+                    .parse()
+                    .ok()
+                    .filter(|b: &f32| b.is_finite() && *b > 0.0)
+                    .with_context(|| {
+                        format!("--residual-error {k}: `{v}` is not a positive bound or `exact`")
+                    })?;
+                DeltaTarget::Bound(b)
+            };
+            for e in cfg.groups.iter_mut().filter(|e| e.0 == group) {
+                e.1 = target;
+            }
+        }
+        Ok(cfg)
+    }
+
     pub fn config(&self, meta: serde_json::Value) -> Result<EncoderConfig> {
         Ok(EncoderConfig {
             canonical: self.canonical()?,
@@ -123,6 +173,7 @@ impl CodecArgs {
             } else {
                 WeightType::F32
             },
+            residual: self.residual()?,
         })
     }
 }
@@ -158,7 +209,12 @@ fn report(input: &Path, output: &Path, frames: u32) -> Result<()> {
     Ok(())
 }
 
-pub fn run_encode(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> {
+pub fn run_encode(
+    input: &Path,
+    output: &Path,
+    codec: &CodecArgs,
+    residual_mode: Option<&str>,
+) -> Result<()> {
     let settings = serde_json::json!(format!("{codec:?}"));
     let f =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
@@ -173,12 +229,22 @@ pub fn run_encode(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> 
     // Re-encode every GOP of an existing stream with new settings.
     let mut dec =
         Decoder::open_path(input).with_context(|| format!("opening {}", input.display()))?;
-    let scene = dec.scene().clone();
+    let mut scene = dec.scene().clone();
+    let input_mode = scene.residual_mode;
+    if let Some(m) = residual_mode {
+        scene.residual_mode = parse_residual_mode(m)?;
+    }
     let mut enc = StreamEncoder::new(out, scene.clone(), codec.config(meta(input, settings))?)?;
     let pb = bar(scene.gop_count as u64, "encoding");
     for g in 0..scene.gop_count {
         let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;
-        enc.push_gop(&gop.canonical, gop.dynamic().as_ref())
+        // A binary voxel residual is kept as it is when the reference structure is unchanged
+        // (it is the model's own representation); otherwise the decoded state is re-coded.
+        let canonical = match (&gop.ntc, scene.residual_mode == input_mode) {
+            (Some(f), true) => GopCanonical::Ntc(f),
+            _ => GopCanonical::State(&gop.canonical),
+        };
+        enc.push(canonical, gop.dynamic().as_ref())
             .with_context(|| format!("encoding GOP {g}"))?;
         pb.inc(1);
     }
@@ -220,6 +286,10 @@ pub struct SynthArgs {
     pub paper_lerp: bool,
     #[arg(long, default_value_t = 6666)]
     pub seed: u64,
+    /// `intra` (every GOP repeats GOP 0's canonical state), or `sequential` / `parallel`:
+    /// GOPs 1.. carry a generated binary voxel residual field (RNTC) against GOP g-1 / GOP 0.
+    #[arg(long, default_value = "intra")]
+    pub residual_mode: String,
     #[command(flatten)]
     pub codec: CodecArgs,
 }
@@ -245,6 +315,7 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
             DeformModel::Reference
         },
         seed: a.seed,
+        residual_mode: parse_residual_mode(&a.residual_mode)?,
     };
     let model = synth_dynamic(&g, &spec)?;
     let settings =
@@ -259,8 +330,12 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
         model.scene.clone(),
         a.codec.config(m)?,
     )?;
-    for (i, d) in model.gops.iter().enumerate() {
-        enc.push_gop(&model.canonical, Some(d))
+    for (i, (d, r)) in model.gops.iter().zip(&model.residuals).enumerate() {
+        let canonical = match r {
+            Some(f) => GopCanonical::Ntc(f),
+            None => GopCanonical::State(&model.canonical),
+        };
+        enc.push(canonical, Some(d))
             .with_context(|| format!("encoding GOP {i}"))?;
         pb.inc(1);
     }
@@ -268,13 +343,14 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
     let mut w = enc.finish()?;
     std::io::Write::flush(&mut w)?;
     println!(
-        "synthetic dynamic model: {} static + {} dynamic Gaussians, {} GOPs x {} frames at {} FPS, keys every {} frames",
+        "synthetic dynamic model: {} static + {} dynamic Gaussians, {} GOPs x {} frames at {} FPS, keys every {} frames, residual mode {:?}",
         model.scene.n_static,
         model.scene.n_dynamic,
         model.scene.gop_count,
         model.scene.gop_length,
         model.scene.fps_num,
-        model.scene.key_interval
+        model.scene.key_interval,
+        model.scene.residual_mode
     );
     report(&a.input, &a.output, model.scene.frame_count)
 }

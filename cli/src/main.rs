@@ -4,6 +4,7 @@ mod cameras_arg;
 mod encode_cmd;
 mod info;
 mod scene_io;
+mod seek_cmd;
 
 use std::path::PathBuf;
 
@@ -41,8 +42,30 @@ enum Cmd {
         input: PathBuf,
         #[arg(short, long)]
         output: PathBuf,
+        /// Change the residual mode when re-encoding a .dlgs (intra, sequential, parallel);
+        /// residual GOPs then carry explicit residuals (RDLT, see --residual-error).
+        #[arg(long)]
+        residual_mode: Option<String>,
         #[command(flatten)]
         codec: encode_cmd::CodecArgs,
+    },
+    /// Seek latency: decode the frame at random times, each from a freshly opened decoder
+    /// (cold: nothing cached) and then in one decoder (warm caches), and print the timings.
+    Seek {
+        file: PathBuf,
+        /// Random times to seek to.
+        #[arg(long, default_value_t = 20)]
+        count: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Render A and B at the last frame of every GOP and the first frame of the next:
+    /// PSNR of B against A at both, and the jump across the boundary within each.
+    Boundaries {
+        a: PathBuf,
+        b: PathBuf,
+        #[command(flatten)]
+        cams: CameraArgs,
     },
     /// Build a SYNTHETIC dynamic model from a real scene (no trained DLGStream model is
     /// available here): a compact subset moves, driven by smooth time features and random
@@ -130,8 +153,11 @@ fn main() -> Result<()> {
         Cmd::Encode {
             input,
             output,
+            residual_mode,
             codec,
-        } => encode_cmd::run_encode(&input, &output, &codec),
+        } => encode_cmd::run_encode(&input, &output, &codec, residual_mode.as_deref()),
+        Cmd::Seek { file, count, seed } => seek_cmd::run_seek(&file, count, seed),
+        Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
         Cmd::Synth(args) => encode_cmd::run_synth(&args),
         Cmd::Decode { file, t, output } => {
             let mut src = scene_io::Source::open(&file)?;

@@ -11,10 +11,14 @@ use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 use std::sync::Arc;
 
+use dlgs::container::gop::NO_REFERENCE;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
+use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
 use dlgs::payload::time_features::{self, TfeaBody};
-use dlgs::payload::{decode_canonical, mlp_weights, CANONICAL_CHUNKS};
+use dlgs::payload::{
+    decode_canonical, decode_residual, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
+};
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
@@ -24,6 +28,61 @@ pub struct DecodedGop {
     pub index: u32,
     pub canonical: Arc<Canonical>,
     pub deformer: Option<Deformer>,
+    /// The chunk the canonical state came from (`CRAW`/`CSOG`, or `RNTC`/`RDLT` for residual
+    /// GOPs).
+    pub source: ChunkType,
+    /// The GOP's binary voxel residual field, when `source` is `RNTC` (for re-encoding).
+    pub ntc: Option<Arc<NtcField>>,
+}
+
+/// A decoded canonical state and where it came from.
+#[derive(Clone)]
+struct State {
+    canonical: Arc<Canonical>,
+    source: ChunkType,
+    ntc: Option<Arc<NtcField>>,
+}
+
+/// Decoded canonical states of recent GOPs (GOP 0 is kept while the cache holds anything: it
+/// is every parallel-mode GOP's reference). Least recently used states are dropped first.
+struct StateCache {
+    capacity: usize,
+    clock: u64,
+    entries: Vec<(u32, State, u64)>,
+}
+
+impl StateCache {
+    fn get(&mut self, g: u32) -> Option<State> {
+        self.clock += 1;
+        let now = self.clock;
+        self.entries.iter_mut().find(|e| e.0 == g).map(|e| {
+            e.2 = now;
+            e.1.clone()
+        })
+    }
+    fn has(&self, g: u32) -> bool {
+        self.entries.iter().any(|e| e.0 == g)
+    }
+    fn insert(&mut self, g: u32, s: State) {
+        if self.capacity == 0 || self.has(g) {
+            return;
+        }
+        self.clock += 1;
+        if self.entries.len() >= self.capacity {
+            // Evict the least recently used, sparing GOP 0 unless it is the only entry.
+            if let Some(i) = self
+                .entries
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| e.0 != 0 || self.capacity == 1)
+                .min_by_key(|(_, e)| e.2)
+                .map(|(i, _)| i)
+            {
+                self.entries.swap_remove(i);
+            }
+        }
+        self.entries.push((g, s, self.clock));
+    }
 }
 
 impl DecodedGop {
@@ -59,6 +118,7 @@ pub struct Decoder<R: Read + Seek> {
     reader: FileReader<R>,
     /// The last decoded GOP, reused while playback stays in it.
     cached: Option<Arc<DecodedGop>>,
+    states: StateCache,
 }
 
 impl Decoder<BufReader<File>> {
@@ -88,6 +148,11 @@ impl<R: Read + Seek> Decoder<R> {
         Ok(Decoder {
             reader: FileReader::open_with_limits(src, limits)?,
             cached: None,
+            states: StateCache {
+                capacity: 4,
+                clock: 0,
+                entries: Vec::new(),
+            },
         })
     }
 
@@ -118,21 +183,8 @@ impl<R: Read + Seek> Decoder<R> {
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        let canon_chunk = CANONICAL_CHUNKS
-            .iter()
-            .find_map(|&ty| Self::find(&chunks, ty))
-            .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
-        let p = self.reader.payload(&canon_chunk)?;
-        let canonical = Arc::new(
-            decode_canonical(
-                canon_chunk.ty,
-                &p,
-                canon_chunk.payload_offset(),
-                &scene,
-                &limits,
-            )
-            .expect("a canonical chunk type")?,
-        );
+        let state = self.state(g)?;
+        let canonical = state.canonical.clone();
         let mut dynamic = None;
         if scene.n_dynamic > 0 {
             let tfea = Self::find(&chunks, ChunkType::TFEA)
@@ -168,9 +220,104 @@ impl<R: Read + Seek> Decoder<R> {
             index: g,
             canonical,
             deformer,
+            source: state.source,
+            ntc: state.ntc,
         });
         self.cached = Some(gop.clone());
         Ok(gop)
+    }
+
+    /// How many decoded canonical states to keep (default 4; GOP 0 is kept preferentially).
+    /// Sequential seeks walk the residual chain from the nearest cached GOP.
+    pub fn set_state_cache(&mut self, capacity: usize) {
+        self.states.capacity = capacity;
+        self.states.entries.clear();
+    }
+
+    /// The decoded canonical state of GOP `g`: its own canonical chunk, or its residual
+    /// applied to its reference GOP's state (§5.1, §6.6, §6.7), walking the chain from the
+    /// nearest cached state.
+    fn state(&mut self, g: u32) -> Result<State> {
+        if let Some(s) = self.states.get(g) {
+            return Ok(s);
+        }
+        let mut chain = vec![g];
+        let mut base = None;
+        loop {
+            let cur = *chain.last().expect("non-empty");
+            let r = self.reader.gop_entry(cur)?.header.reference_gop;
+            if r == NO_REFERENCE {
+                break;
+            }
+            if let Some(s) = self.states.get(r) {
+                base = Some(s);
+                break;
+            }
+            if chain.len() > self.scene().gop_count as usize {
+                return Err(Error::new(
+                    ErrorKind::Index("reference GOPs form a cycle"),
+                    self.reader.gop_entry(g)?.offset,
+                ));
+            }
+            chain.push(r);
+        }
+        while let Some(cur) = chain.pop() {
+            let s = self.decode_state(cur, base.as_ref())?;
+            self.states.insert(cur, s.clone());
+            base = Some(s);
+        }
+        Ok(base.expect("the chain decoded at least GOP g"))
+    }
+
+    /// Decode GOP `g`'s canonical chunk, or apply its residual chunk to `base`.
+    fn decode_state(&mut self, g: u32, base: Option<&State>) -> Result<State> {
+        let chunks = self.reader.gop_chunks(g)?;
+        let gop_at = self.reader.gop_entry(g)?.offset;
+        let scene = self.reader.scene().clone();
+        let limits = *self.reader.limits();
+        let find = |set: &[ChunkType]| set.iter().find_map(|&ty| Self::find(&chunks, ty));
+        let (canon, residual) = (find(&CANONICAL_CHUNKS), find(&RESIDUAL_CHUNKS));
+        let Some(base) = base else {
+            if let Some(c) = residual {
+                return Err(Error::new(
+                    ErrorKind::Order("a residual chunk in a GOP without a reference GOP"),
+                    c.offset,
+                ));
+            }
+            let c = canon
+                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
+            let p = self.reader.payload(&c)?;
+            let canonical = decode_canonical(c.ty, &p, c.payload_offset(), &scene, &limits)
+                .expect("a canonical chunk type")?;
+            return Ok(State {
+                canonical: Arc::new(canonical),
+                source: c.ty,
+                ntc: None,
+            });
+        };
+        if let Some(c) = canon {
+            return Err(Error::new(
+                ErrorKind::Order("a canonical chunk in a GOP that has a reference GOP"),
+                c.offset,
+            ));
+        }
+        let c =
+            residual.ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::RDLT), gop_at))?;
+        let p = self.reader.payload(&c)?;
+        let at = c.payload_offset();
+        let (canonical, ntc) = decode_residual(c.ty, &p, at, &scene, &limits, &base.canonical)
+            .expect("a residual chunk type")?;
+        Ok(State {
+            canonical: Arc::new(canonical),
+            source: c.ty,
+            ntc: ntc.map(Arc::new),
+        })
+    }
+
+    /// Prepare the GOP that holds time `t` and return the Gaussians at `t`: the same as
+    /// [`Self::frame_at`], named for players that jump.
+    pub fn seek(&mut self, t: f64, opts: &FrameOptions) -> Result<Frame> {
+        self.frame_at(t, opts)
     }
 
     /// Decode the canonical Gaussians of GOP `g`.

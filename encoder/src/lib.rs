@@ -1,20 +1,26 @@
 //! `dlgs-encoder`: turns scene models into `.dlgs` streams.
 //!
-//! It writes intra GOPs: canonical Gaussians (raw `CRAW`, or sorted quantised grids `CSOG`)
-//! and, for dynamic scenes, the key time features (`TFEA`, 12-bit HEVC or exact) and the
-//! deformation decoders (`MLPW`). Residual stages plug in here as their issues land.
+//! Every GOP carries its canonical state, either in full (raw `CRAW`, or sorted quantised grids
+//! `CSOG`) or, in sequential and parallel scenes from GOP 1 on, as a residual against the
+//! reference GOP (binary voxel field `RNTC`, or explicit deltas `RDLT` computed closed-loop
+//! against what the decoder will reconstruct); and, for dynamic scenes, the key time features
+//! (`TFEA`, 12-bit HEVC or exact) and the deformation decoders (`MLPW`).
 
 pub mod grid_sort;
 pub mod synth;
 
 use std::io::Write;
 
+use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
+use dlgs::model::ntc::NtcField;
+use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
 use dlgs::model::DynamicGop;
 use dlgs::payload::mlp_weights::{self, WeightType};
 use dlgs::payload::raw_canonical::{self, RawCodec};
 use dlgs::payload::sorted_grid::{self, QuantBits};
 use dlgs::payload::time_features::{self, TfeaBody, Tiling};
+use dlgs::payload::{decode_canonical, delta_residual, ntc_residual};
 use dlgs::{Canonical, Error, ErrorKind, Result};
 pub use dlgs_video::HevcSettings;
 
@@ -39,6 +45,35 @@ pub enum CanonicalCodec {
 
 pub use grid_sort::SortSpec;
 
+/// What a GOP carries for its canonical state.
+#[derive(Debug, Clone, Copy)]
+pub enum GopCanonical<'a> {
+    /// The full canonical state. Residual GOPs of sequential/parallel scenes code it as an
+    /// explicit residual (`RDLT`) against the reference GOP's decoded state.
+    State(&'a Canonical),
+    /// A binary voxel residual field (`RNTC`) applied to the reference GOP's decoded state.
+    Ntc(&'a NtcField),
+}
+
+/// How explicit residuals (`RDLT`) are made: the error asked for each attribute group.
+/// Groups not listed are not changed by residuals (their reference value is kept).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResidualConfig {
+    pub groups: Vec<(AttrGroup, DeltaTarget)>,
+}
+
+impl Default for ResidualConfig {
+    /// Every group, bit-exact.
+    fn default() -> Self {
+        ResidualConfig {
+            groups: AttrGroup::ALL
+                .into_iter()
+                .map(|g| (g, DeltaTarget::Exact))
+                .collect(),
+        }
+    }
+}
+
 /// Encoder settings.
 #[derive(Debug, Clone)]
 pub struct EncoderConfig {
@@ -56,6 +91,8 @@ pub struct EncoderConfig {
     pub per_gop_range: bool,
     /// Storage type of the MLP weights.
     pub mlp_weights: WeightType,
+    /// Explicit residuals of sequential/parallel scenes.
+    pub residual: ResidualConfig,
 }
 
 impl Default for EncoderConfig {
@@ -68,6 +105,7 @@ impl Default for EncoderConfig {
             features: FeatureCodec::Hevc(HevcSettings::default()),
             per_gop_range: false,
             mlp_weights: WeightType::F32,
+            residual: ResidualConfig::default(),
         }
     }
 }
@@ -76,6 +114,13 @@ impl Default for EncoderConfig {
 pub struct StreamEncoder<W: Write> {
     writer: Writer<W>,
     cfg: EncoderConfig,
+    next_gop: u32,
+    /// Decoded canonical state of the previous GOP and of GOP 0 (residual scenes only): what
+    /// the decoder will hold, so residuals are computed closed-loop and errors do not drift.
+    previous: Option<Canonical>,
+    first: Option<Canonical>,
+    /// The grid order GOP 0's static set was stored in (`CSOG`), applied to later full states.
+    static_order: Option<Vec<u32>>,
 }
 
 impl<W: Write> StreamEncoder<W> {
@@ -86,7 +131,14 @@ impl<W: Write> StreamEncoder<W> {
                 .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
             writer.scene_chunk(ChunkType::META, 0, &bytes)?;
         }
-        Ok(StreamEncoder { writer, cfg })
+        Ok(StreamEncoder {
+            writer,
+            cfg,
+            next_gop: 0,
+            previous: None,
+            first: None,
+            static_order: None,
+        })
     }
 
     /// Append the next GOP, coded intra from its canonical Gaussians (static scenes).
@@ -97,28 +149,14 @@ impl<W: Write> StreamEncoder<W> {
     /// Append the next GOP: canonical Gaussians plus, when the scene has dynamic Gaussians,
     /// its deformation field.
     pub fn push_gop(&mut self, canon: &Canonical, dynamic: Option<&DynamicGop>) -> Result<()> {
-        let s = self.writer.scene();
-        if canon.statics.len() != s.n_static as usize
-            || canon.dynamics.len() != s.n_dynamic as usize
-        {
-            return Err(Error::new(
-                ErrorKind::InvalidInput(format!(
-                    "GOP has {}/{} static/dynamic Gaussians, header declares {}/{}",
-                    canon.statics.len(),
-                    canon.dynamics.len(),
-                    s.n_static,
-                    s.n_dynamic
-                )),
-                0,
-            ));
-        }
-        if canon.statics.sh_degree != s.sh_degree || canon.statics.lang_width != s.lang_width() {
-            return Err(Error::new(
-                ErrorKind::InvalidInput(
-                    "GOP layout differs from the header (SH degree or language width)".into(),
-                ),
-                0,
-            ));
+        self.push(GopCanonical::State(canon), dynamic)
+    }
+
+    /// Append the next GOP from its canonical state or residual field.
+    pub fn push(&mut self, canonical: GopCanonical, dynamic: Option<&DynamicGop>) -> Result<()> {
+        let s = self.writer.scene().clone();
+        if let GopCanonical::State(canon) = canonical {
+            check_layout(canon, &s)?;
         }
         let dyn_chunks = match (s.n_dynamic > 0, dynamic) {
             (false, None) => None,
@@ -134,21 +172,47 @@ impl<W: Write> StreamEncoder<W> {
                 ))
             }
         };
-        let (ty, payload) = match self.cfg.canonical {
-            CanonicalCodec::Raw => (
-                ChunkType::CRAW,
-                raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?,
-            ),
-            CanonicalCodec::Sorted { bits, sort } => {
-                let order = grid_sort::grid_order(&canon.statics, sort);
-                let sorted = Canonical {
-                    statics: grid_sort::permute(&canon.statics, &order),
-                    dynamics: canon.dynamics.clone(),
-                };
-                (
-                    ChunkType::CSOG,
-                    sorted_grid::encode(&sorted, &bits, self.cfg.zstd_level)?,
-                )
+        let g = self.next_gop;
+        let reference = GopHeader::expected(&s, g).reference_gop;
+        let tracks_state = s.residual_mode != dlgs::container::header::ResidualMode::Intra;
+        let (ty, payload, decoded) = if reference == NO_REFERENCE {
+            let GopCanonical::State(canon) = canonical else {
+                return Err(invalid(format!(
+                    "GOP {g} has no reference GOP: it needs a full canonical state, not a residual"
+                )));
+            };
+            let (ty, payload) = self.canonical_payload(canon, g == 0)?;
+            let decoded = if tracks_state {
+                let limits = dlgs::Limits::default();
+                Some(decode_canonical(ty, &payload, 0, &s, &limits).expect("canonical chunk")?)
+            } else {
+                None
+            };
+            (ty, payload, decoded)
+        } else {
+            let base = if reference == 0 {
+                self.first.as_ref()
+            } else {
+                self.previous.as_ref()
+            }
+            .expect("the reference GOP was encoded before");
+            match canonical {
+                GopCanonical::State(target) => {
+                    let target = match &self.static_order {
+                        Some(order) => Canonical {
+                            statics: grid_sort::permute(&target.statics, order),
+                            dynamics: target.dynamics.clone(),
+                        },
+                        None => target.clone(),
+                    };
+                    let r = DeltaResidual::compute(&target, base, &self.cfg.residual.groups)?;
+                    let payload = delta_residual::encode(&r, &s, self.cfg.zstd_level)?;
+                    (ChunkType::RDLT, payload, Some(r.apply(base)))
+                }
+                GopCanonical::Ntc(field) => {
+                    let payload = ntc_residual::encode(field, &s, self.cfg.zstd_level)?;
+                    (ChunkType::RNTC, payload, Some(field.apply(base)?))
+                }
             }
         };
         self.writer.begin_gop()?;
@@ -159,7 +223,40 @@ impl<W: Write> StreamEncoder<W> {
             self.writer
                 .gop_chunk(ChunkType::MLPW, FLAG_MUST_UNDERSTAND, &mlpw)?;
         }
+        if g == 0 {
+            self.first = decoded.clone();
+        }
+        self.previous = decoded;
+        self.next_gop += 1;
         Ok(())
+    }
+
+    /// A full canonical chunk (`CRAW` or `CSOG`); remembers GOP 0's grid order.
+    fn canonical_payload(
+        &mut self,
+        canon: &Canonical,
+        first: bool,
+    ) -> Result<(ChunkType, Vec<u8>)> {
+        Ok(match self.cfg.canonical {
+            CanonicalCodec::Raw => (
+                ChunkType::CRAW,
+                raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?,
+            ),
+            CanonicalCodec::Sorted { bits, sort } => {
+                let order = grid_sort::grid_order(&canon.statics, sort);
+                let sorted = Canonical {
+                    statics: grid_sort::permute(&canon.statics, &order),
+                    dynamics: canon.dynamics.clone(),
+                };
+                if first {
+                    self.static_order = Some(order);
+                }
+                (
+                    ChunkType::CSOG,
+                    sorted_grid::encode(&sorted, &bits, self.cfg.zstd_level)?,
+                )
+            }
+        })
     }
 
     fn dynamic_payloads(&self, d: &DynamicGop) -> Result<(Vec<u8>, Vec<u8>)> {
@@ -231,6 +328,24 @@ pub fn encode_still<W: Write>(g: &dlgs::Gaussians, cfg: EncoderConfig, out: W) -
     let mut enc = StreamEncoder::new(out, scene, cfg)?;
     enc.push_intra_gop(&Canonical::from_static(g.clone()))?;
     enc.finish()
+}
+
+fn check_layout(canon: &Canonical, s: &SceneHeader) -> Result<()> {
+    if canon.statics.len() != s.n_static as usize || canon.dynamics.len() != s.n_dynamic as usize {
+        return Err(invalid(format!(
+            "GOP has {}/{} static/dynamic Gaussians, header declares {}/{}",
+            canon.statics.len(),
+            canon.dynamics.len(),
+            s.n_static,
+            s.n_dynamic
+        )));
+    }
+    if canon.statics.sh_degree != s.sh_degree || canon.statics.lang_width != s.lang_width() {
+        return Err(invalid(
+            "GOP layout differs from the header (SH degree or language width)".into(),
+        ));
+    }
+    Ok(())
 }
 
 fn invalid(msg: String) -> Error {

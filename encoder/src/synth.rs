@@ -8,6 +8,8 @@
 
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::SceneHeader;
+use dlgs::model::ntc::{NtcConfig, NtcField, NtcMlp};
+use dlgs::model::residual::{groups_of, AttrGroup, SET_DYNAMIC, SET_STATIC};
 use dlgs::model::{
     Canonical, DeformMlps, DynamicGop, Gaussians, Layer, Mlp, MlpRole, TimeFeatures,
 };
@@ -30,6 +32,10 @@ pub struct SynthSpec {
     pub language: bool,
     pub deform_model: DeformModel,
     pub seed: u64,
+    /// Residual mode of the generated scene. Intra: every GOP has the same canonical state.
+    /// Sequential/parallel: GOP g >= 1 carries a generated binary voxel residual field
+    /// against GOP g-1 / GOP 0.
+    pub residual_mode: ResidualMode,
 }
 
 impl Default for SynthSpec {
@@ -45,17 +51,133 @@ impl Default for SynthSpec {
             language: false,
             deform_model: DeformModel::Reference,
             seed: 6666,
+            residual_mode: ResidualMode::Intra,
         }
     }
 }
 
-/// A generated model: one canonical state shared by every GOP (intra coded) and one
-/// deformation field per GOP.
+/// A generated model: GOP 0's canonical state, one deformation field per GOP and, in
+/// residual scenes, one binary voxel residual field per GOP from GOP 1 on.
 #[derive(Debug, Clone)]
 pub struct SynthModel {
     pub scene: SceneHeader,
     pub canonical: Canonical,
     pub gops: Vec<DynamicGop>,
+    /// `residuals[g]` for GOP g (None for GOP 0 and in intra scenes).
+    pub residuals: Vec<Option<NtcField>>,
+}
+
+impl SynthModel {
+    /// Every GOP's canonical state, computed from the model's own fields (the ground truth a
+    /// decoder of a losslessly coded model must reproduce).
+    pub fn canonical_states(&self) -> Result<Vec<Canonical>> {
+        let mut out: Vec<Canonical> = Vec::with_capacity(self.gops.len());
+        for (g, r) in self.residuals.iter().enumerate() {
+            let next = match (r, self.scene.residual_mode) {
+                (None, _) => self.canonical.clone(),
+                (Some(f), ResidualMode::Parallel) => f.apply(&out[0])?,
+                (Some(f), _) => f.apply(&out[g - 1])?,
+            };
+            out.push(next);
+        }
+        Ok(out)
+    }
+}
+
+/// Size of the residual each attribute group gets, relative to `size` for positions and
+/// absolute for the others (pre-sigmoid opacities, log-scales, SH, language).
+fn residual_scale(group: AttrGroup, size: f32) -> f32 {
+    match group {
+        AttrGroup::Position => 0.002 * size,
+        AttrGroup::LogScale | AttrGroup::Rotation => 0.02,
+        AttrGroup::ShDc => 0.03,
+        AttrGroup::ShRest => 0.01,
+        AttrGroup::Opacity | AttrGroup::LangOpacity => 0.1,
+        AttrGroup::Lang => 0.02,
+    }
+}
+
+/// A *generated* binary voxel residual field with the reference's shapes: plane levels whose
+/// +1 frequency falls from 0.5 (coarsest) to 0.05 (finest), as a rate-penalised training
+/// leaves them; a random MLP rescaled so every output has a plausible size.
+pub fn synth_ntc(c: &Canonical, rng: &mut fastrand::Rng, size: f32, config: NtcConfig) -> NtcField {
+    let all: Vec<[f32; 3]> = c
+        .statics
+        .positions
+        .iter()
+        .chain(&c.dynamics.positions)
+        .copied()
+        .collect();
+    let mut bound_min = [0f32; 3];
+    let mut bound_max = [0f32; 3];
+    for a in 0..3 {
+        let mut v: Vec<f32> = all.iter().map(|p| p[a]).collect();
+        v.sort_by(|x, y| x.total_cmp(y));
+        let (lo, hi) = (v[v.len() / 100], v[(v.len() * 99) / 100]);
+        let pad = 0.1 * (hi - lo).max(1e-3);
+        bound_min[a] = lo - pad;
+        bound_max[a] = hi + pad;
+    }
+    let freq = [0.5, 0.3, 0.15, 0.05];
+    let planes = (0..3 * config.levels())
+        .map(|i| {
+            let p = freq[(i % config.levels()).min(3)];
+            (0..config.level_bits()).map(|_| rng.f64() < p).collect()
+        })
+        .collect();
+    let gate = (0..config.gate_table()).map(|_| rng.bool()).collect();
+    let s = &c.statics;
+    let groups = groups_of(s.sh_degree, s.lang_width);
+    let outputs: usize = groups
+        .iter()
+        .map(|g| g.width(s.sh_degree, s.lang_width))
+        .sum();
+    let (inputs, hidden) = (config.input_width(), 100);
+    let mut uni = |n: usize, bound: f32| -> Vec<f32> {
+        (0..n).map(|_| (rng.f32() * 2.0 - 1.0) * bound).collect()
+    };
+    let mlp = NtcMlp {
+        inputs,
+        hidden,
+        outputs,
+        w1: uni(inputs * hidden, 1.0 / (inputs as f32).sqrt()),
+        b1: uni(hidden, 1.0 / (inputs as f32).sqrt()),
+        w2: uni(hidden * outputs, 1.0 / (hidden as f32).sqrt()),
+        b2: uni(outputs, 1.0 / (hidden as f32).sqrt()),
+    };
+    let mut field = NtcField {
+        config,
+        bound_min,
+        bound_max,
+        planes,
+        gate,
+        mlp,
+        groups: groups.iter().fold(0, |m, g| m | g.bit()),
+        sets: SET_STATIC | SET_DYNAMIC,
+    };
+    // Rescale each output column to its group's size over a sample of positions.
+    let step = (all.len() / 2000).max(1);
+    let sample: Vec<[f32; 3]> = all.iter().step_by(step).copied().collect();
+    let rows: Vec<Vec<f32>> = field
+        .residuals_at(&sample)
+        .chunks(outputs)
+        .filter(|r| r.iter().any(|&v| v != 0.0))
+        .map(|r| r.to_vec())
+        .collect();
+    let mut col = 0;
+    for g in &groups {
+        for _ in 0..g.width(s.sh_degree, s.lang_width) {
+            let n = rows.len().max(1) as f32;
+            let rms = (rows.iter().map(|r| r[col] * r[col]).sum::<f32>() / n).sqrt();
+            let k = residual_scale(*g, size) / rms.max(1e-12);
+            for j in 0..hidden {
+                field.mlp.w2[col * hidden + j] *= k;
+            }
+            field.mlp.b2[col] *= k;
+            col += 1;
+        }
+    }
+    field
 }
 
 fn median(mut v: Vec<f32>) -> f32 {
@@ -231,7 +353,7 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
     let frames = spec.gops * spec.gop_length;
     let scene = SceneHeader {
         variant: Variant::Gaussians3d,
-        residual_mode: ResidualMode::Intra,
+        residual_mode: spec.residual_mode,
         deform_model: spec.deform_model,
         sh_degree: g.sh_degree,
         lang_levels: if g.has_language() { 3 } else { 0 },
@@ -337,10 +459,20 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
             },
         });
     }
+    let canonical = Canonical { statics, dynamics };
+    // Residual fields come from their own seed so that intra models keep their values.
+    let mut rrng = fastrand::Rng::with_seed(spec.seed ^ 0x005e_ed0f_4e51_d0a1);
+    let residuals = (0..spec.gops)
+        .map(|g| {
+            (g > 0 && spec.residual_mode != ResidualMode::Intra)
+                .then(|| synth_ntc(&canonical, &mut rrng, size, NtcConfig::default()))
+        })
+        .collect();
     Ok(SynthModel {
         scene,
-        canonical: Canonical { statics, dynamics },
+        canonical,
         gops,
+        residuals,
     })
 }
 
@@ -351,8 +483,13 @@ pub fn write_model<W: std::io::Write>(
     out: W,
 ) -> Result<W> {
     let mut enc = crate::StreamEncoder::new(out, model.scene.clone(), cfg)?;
-    for d in &model.gops {
-        enc.push_gop(&model.canonical, Some(d))?;
+    let dynamic = model.scene.n_dynamic > 0;
+    for (d, r) in model.gops.iter().zip(&model.residuals) {
+        let canonical = match r {
+            Some(f) => crate::GopCanonical::Ntc(f),
+            None => crate::GopCanonical::State(&model.canonical),
+        };
+        enc.push(canonical, dynamic.then_some(d))?;
     }
     enc.finish()
 }

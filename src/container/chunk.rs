@@ -22,6 +22,10 @@ impl ChunkType {
     pub const MLPW: ChunkType = ChunkType(*b"MLPW");
     /// Canonical Gaussians as quantised, sorted attribute grids, §6.5.
     pub const CSOG: ChunkType = ChunkType(*b"CSOG");
+    /// Binary-voxel residual field against the reference GOP, §6.6.
+    pub const RNTC: ChunkType = ChunkType(*b"RNTC");
+    /// Explicit quantised per-attribute residual against the reference GOP, §6.7.
+    pub const RDLT: ChunkType = ChunkType(*b"RDLT");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes

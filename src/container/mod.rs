@@ -26,6 +26,8 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::TFEA,
     ChunkType::MLPW,
     ChunkType::CSOG,
+    ChunkType::RNTC,
+    ChunkType::RDLT,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

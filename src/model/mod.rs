@@ -2,6 +2,8 @@
 
 pub mod dynamic;
 pub mod gaussians;
+pub mod ntc;
+pub mod residual;
 
 pub use dynamic::{DeformMlps, DynamicGop, Layer, Mlp, MlpRole, TimeFeatures, TimePoint};
 pub use gaussians::{sh_coeffs, Canonical, Gaussians};

@@ -90,6 +90,12 @@ pub fn all() -> Vec<Vector> {
         error: None,
         about: "2 GOPs of 60 frames, 128 of 512 lod3 Gaussians animated by the synthetic generator (no trained DLGStream model exists here), language, exact TFEA, f32 MLPW; decoded frames in lod3-dynamic.frames.f32",
     });
+    v.push(Vector {
+        name: "lod3-residuals",
+        bytes: residual_vector(&lod3),
+        error: None,
+        about: "3 sequential GOPs of 512 lod3 Gaussians: GOP 0 CRAW, GOP 1 a generated binary voxel residual field (RNTC, small grids), GOP 2 explicit residuals (RDLT: positions within 1e-4, SH DC within 2e-3, the rest exact); exact TFEA",
+    });
     let mut bad = |name, error, about, f: &dyn Fn(&mut Vec<u8>)| {
         let mut b = base.clone();
         f(&mut b);
@@ -229,6 +235,66 @@ fn dynamic_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
         ..Default::default()
     };
     write_model(&m, cfg, Vec::new()).unwrap()
+}
+
+fn residual_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs::container::header::ResidualMode;
+    use dlgs::model::ntc::NtcConfig;
+    use dlgs::model::residual::{AttrGroup, DeltaTarget};
+    use dlgs_encoder::synth::{synth_dynamic, synth_ntc, SynthSpec};
+    use dlgs_encoder::{GopCanonical, ResidualConfig, StreamEncoder};
+    let mut part = dlgs::Gaussians::new(scene.sh_degree, scene.lang_width);
+    for i in 0..512 {
+        part.push_from(scene, i);
+    }
+    let spec = SynthSpec {
+        dynamic_fraction: 0.25,
+        max_dynamic: 64,
+        gops: 3,
+        residual_mode: ResidualMode::Sequential,
+        ..Default::default()
+    };
+    let m = synth_dynamic(&part, &spec).unwrap();
+    // Small grids keep the vector small; every rule of §6.6 still applies (hashed and dense
+    // levels: 16^2 <= 2^10 is dense, 64^2 is hashed).
+    let small = NtcConfig {
+        resolutions: vec![16, 32, 64, 128],
+        features: 4,
+        log2_table: 10,
+        gate_resolution: 18,
+        gate_log2_table: 10,
+    };
+    let field = synth_ntc(&m.canonical, &mut fastrand::Rng::with_seed(77), 1.0, small);
+    let s1 = field.apply(&m.canonical).unwrap();
+    let mut s2 = s1.clone();
+    for (i, p) in s2.statics.positions.iter_mut().enumerate() {
+        p[1] += 0.001 * (i % 7) as f32;
+    }
+    for v in s2.dynamics.sh.iter_mut().step_by(3) {
+        *v -= 0.01;
+    }
+    let cfg = dlgs_encoder::EncoderConfig {
+        features: dlgs_encoder::FeatureCodec::Exact,
+        residual: ResidualConfig {
+            groups: AttrGroup::ALL
+                .into_iter()
+                .map(|g| match g {
+                    AttrGroup::Position => (g, DeltaTarget::Bound(1e-4)),
+                    AttrGroup::ShDc => (g, DeltaTarget::Bound(2e-3)),
+                    _ => (g, DeltaTarget::Exact),
+                })
+                .collect(),
+        },
+        ..Default::default()
+    };
+    let mut enc = StreamEncoder::new(Vec::new(), m.scene.clone(), cfg).unwrap();
+    enc.push(GopCanonical::State(&m.canonical), Some(&m.gops[0]))
+        .unwrap();
+    enc.push(GopCanonical::Ntc(&field), Some(&m.gops[1]))
+        .unwrap();
+    enc.push(GopCanonical::State(&s2), Some(&m.gops[2]))
+        .unwrap();
+    enc.finish().unwrap()
 }
 
 /// The dynamic Gaussians of `bytes` at [`FRAME_TIMES`], language on, as f32 little-endian:

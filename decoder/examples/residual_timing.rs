@@ -1,0 +1,55 @@
+//! Where the time of a residual GOP goes: `cargo run --release -p dlgs-decoder --example
+//! residual_timing -- FILE.dlgs` times, for every residual GOP, reading and decoding its
+//! residual chunk and applying it to the reference state.
+
+use std::time::Instant;
+
+use dlgs::container::ChunkType;
+use dlgs::payload::{delta_residual, ntc_residual};
+use dlgs_decoder::Decoder;
+
+fn main() -> dlgs::Result<()> {
+    let path = std::env::args()
+        .nth(1)
+        .expect("usage: residual_timing FILE.dlgs");
+    let mut dec = Decoder::open_path(&path)?;
+    let scene = dec.scene().clone();
+    let limits = *dec.reader().limits();
+    let base = dec.gop_canonical(0)?;
+    for g in 1..scene.gop_count {
+        let chunks = dec.reader().gop_chunks(g)?;
+        for c in chunks {
+            let t0 = Instant::now();
+            let p = dec.reader().payload(&c)?;
+            let t1 = Instant::now();
+            let (decode_ms, apply_ms) = match c.ty {
+                ChunkType::RNTC => {
+                    let f = ntc_residual::decode(&p, 0, &scene, &limits)?;
+                    let t2 = Instant::now();
+                    f.apply(&base)?;
+                    (
+                        (t2 - t1).as_secs_f64() * 1e3,
+                        t2.elapsed().as_secs_f64() * 1e3,
+                    )
+                }
+                ChunkType::RDLT => {
+                    let d = delta_residual::decode(&p, 0, &scene, &limits)?;
+                    let t2 = Instant::now();
+                    d.apply(&base);
+                    (
+                        (t2 - t1).as_secs_f64() * 1e3,
+                        t2.elapsed().as_secs_f64() * 1e3,
+                    )
+                }
+                _ => continue,
+            };
+            println!(
+                "GOP {g} {}: {} bytes, read {:.2} ms, decode {decode_ms:.2} ms, apply {apply_ms:.2} ms",
+                c.ty,
+                p.len(),
+                (t1 - t0).as_secs_f64() * 1e3
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,477 @@
+//! The binary-voxel residual field (`RNTC`, format-spec §6.6): three 2D binary hash planes
+//! (xy, xz, yz) with several levels, a 3D binary gate grid, and a small MLP with biases that
+//! maps the gated plane features of a Gaussian's position to offsets of its attributes.
+//!
+//! This is the reference's `NTC_encoding` (binary STE grids, 4 levels 512..4096, 2^15 entries,
+//! 4 features; gate 514^3 hashed into 2^15; `ntc_mlp` 48 -> 100 -> out) applied, as the paper
+//! describes for 3DGS, to every attribute group of static and dynamic Gaussians. The lookup
+//! follows the reference's grid encoder as documented in ../shared/reference (§3.5 there).
+
+use bitvec::prelude::*;
+use multiversion::multiversion;
+use rayon::prelude::*;
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::model::residual::{AttrGroup, SET_DYNAMIC, SET_STATIC};
+use crate::model::Canonical;
+
+/// Hash primes of the grid encoder, per dimension.
+pub const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
+/// Planes in their storage order, as (first axis, second axis).
+pub const PLANES: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
+/// Added to the sum of kept corner weights before dividing.
+pub const WEIGHT_EPS: f32 = 1e-9;
+
+/// Shapes of the binary grids.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NtcConfig {
+    /// Resolution of each plane level (reference: 512, 1024, 2048, 4096).
+    pub resolutions: Vec<u32>,
+    /// Features per plane entry (reference: 4).
+    pub features: u8,
+    /// log2 of the entries per plane level (reference: 15).
+    pub log2_table: u8,
+    /// Resolution of the 3D gate grid (reference: 514); one level, one feature.
+    pub gate_resolution: u32,
+    /// log2 of the gate grid's entries (reference: 15).
+    pub gate_log2_table: u8,
+}
+
+impl Default for NtcConfig {
+    fn default() -> Self {
+        NtcConfig {
+            resolutions: vec![512, 1024, 2048, 4096],
+            features: 4,
+            log2_table: 15,
+            gate_resolution: 514,
+            gate_log2_table: 15,
+        }
+    }
+}
+
+impl NtcConfig {
+    pub fn levels(&self) -> usize {
+        self.resolutions.len()
+    }
+    pub fn table(&self) -> usize {
+        1 << self.log2_table
+    }
+    pub fn gate_table(&self) -> usize {
+        1 << self.gate_log2_table
+    }
+    /// Width of the MLP input: planes x levels x features.
+    pub fn input_width(&self) -> usize {
+        3 * self.levels() * self.features as usize
+    }
+    /// Bits in one plane level.
+    pub fn level_bits(&self) -> usize {
+        self.table() * self.features as usize
+    }
+}
+
+/// `Linear(in -> hidden) + ReLU + Linear(hidden -> out)`, with biases, PyTorch layout
+/// (`w1[j * in + i]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NtcMlp {
+    pub inputs: usize,
+    pub hidden: usize,
+    pub outputs: usize,
+    pub w1: Vec<f32>,
+    pub b1: Vec<f32>,
+    pub w2: Vec<f32>,
+    pub b2: Vec<f32>,
+}
+
+impl NtcMlp {
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.w1.len() != self.inputs * self.hidden
+            || self.b1.len() != self.hidden
+            || self.w2.len() != self.hidden * self.outputs
+            || self.b2.len() != self.outputs
+        {
+            return Err(format!(
+                "MLP weights do not match {} -> {} -> {}",
+                self.inputs, self.hidden, self.outputs
+            ));
+        }
+        Ok(())
+    }
+    pub fn params(&self) -> impl Iterator<Item = &f32> {
+        self.w1
+            .iter()
+            .chain(&self.b1)
+            .chain(&self.w2)
+            .chain(&self.b2)
+    }
+}
+
+/// One GOP's binary residual field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NtcField {
+    pub config: NtcConfig,
+    /// Normalisation box: `u = (x - min) / (max - min)` per axis; Gaussians with any `u`
+    /// outside [0, 1] get no residual.
+    pub bound_min: [f32; 3],
+    pub bound_max: [f32; 3],
+    /// `3 * levels` bit arrays (xy levels, then xz, then yz), each `table * features` bits,
+    /// entry-major: bit `e * features + f` is feature f of entry e; 1 = +1, 0 = -1.
+    pub planes: Vec<BitVec<u64, Lsb0>>,
+    /// `gate_table` bits.
+    pub gate: BitVec<u64, Lsb0>,
+    pub mlp: NtcMlp,
+    /// Attribute groups the MLP output covers, bit `g` for `AttrGroup` g; output columns follow
+    /// the groups in ascending order.
+    pub groups: u8,
+    /// Sets the residual applies to: `SET_STATIC | SET_DYNAMIC`.
+    pub sets: u8,
+}
+
+fn invalid(msg: String) -> Error {
+    Error::new(ErrorKind::InvalidInput(msg), 0)
+}
+
+/// The groups a mask selects, ascending.
+pub fn groups_in(mask: u8) -> impl Iterator<Item = AttrGroup> {
+    AttrGroup::ALL
+        .into_iter()
+        .filter(move |g| mask & g.bit() != 0)
+}
+
+/// Interpolated feature of a `D`-dimensional binary grid at `u` (in [0,1]^D) (§6.6.3).
+/// `fetch(index)` returns the ±1 values of the entry's features through `acc`.
+#[inline]
+fn lookup<const D: usize>(
+    u: [f32; D],
+    resolution: u32,
+    table: usize,
+    mut add: impl FnMut(usize, f32),
+) -> f32 {
+    let r = resolution;
+    let mut g = [0u32; D];
+    let mut frac = [0f32; D];
+    for d in 0..D {
+        let pos = u[d] * (r - 2) as f32 + 0.5;
+        let fl = pos.floor();
+        g[d] = fl as u32;
+        frac[d] = pos - fl;
+    }
+    let dense = (r as u64).pow(D as u32) <= table as u64;
+    let mut wsum = 0f32;
+    for corner in 0..(1usize << D) {
+        let mut w = 1f32;
+        let mut idx: u64 = 0;
+        let mut stride: u64 = 1;
+        let mut hash: u32 = 0;
+        let mut dropped = false;
+        for d in 0..D {
+            let up = corner >> d & 1 == 1;
+            let c = (g[d] + up as u32).min(r - 1);
+            dropped |= c == 0 || c == r - 1;
+            w *= if up { frac[d] } else { 1.0 - frac[d] };
+            idx += c as u64 * stride;
+            stride *= r as u64;
+            hash ^= c.wrapping_mul(PRIMES[d]);
+        }
+        if dropped {
+            continue;
+        }
+        let index = if dense {
+            (idx % table as u64) as usize
+        } else {
+            hash as usize % table
+        };
+        wsum += w;
+        add(index, w);
+    }
+    wsum + WEIGHT_EPS
+}
+
+/// Decoded grids in a lookup-friendly form: per plane level one byte per entry holding its
+/// feature bits.
+struct Tables {
+    planes: Vec<Vec<u8>>,
+    gate: Vec<u8>,
+}
+
+impl NtcField {
+    /// Structural checks (also run on decode): shapes, bounds, groups present in the scene.
+    pub fn validate(&self, sh_degree: u8, lang_width: usize) -> std::result::Result<(), String> {
+        let c = &self.config;
+        if c.resolutions.is_empty() || c.resolutions.len() > 16 {
+            return Err(format!("{} plane levels (1..=16)", c.resolutions.len()));
+        }
+        if c.resolutions.iter().any(|&r| !(3..=1 << 20).contains(&r))
+            || !(3..=1 << 20).contains(&c.gate_resolution)
+        {
+            return Err("grid resolutions must be in 3..=2^20".into());
+        }
+        if !(1..=8).contains(&c.features) {
+            return Err(format!("{} features per entry (1..=8)", c.features));
+        }
+        if !(1..=24).contains(&c.log2_table) || !(1..=24).contains(&c.gate_log2_table) {
+            return Err("log2 table sizes must be in 1..=24".into());
+        }
+        if self.planes.len() != 3 * c.levels()
+            || self.planes.iter().any(|p| p.len() != c.level_bits())
+            || self.gate.len() != c.gate_table()
+        {
+            return Err("grid bit counts do not match the configuration".into());
+        }
+        for a in 0..3 {
+            let (lo, hi) = (self.bound_min[a], self.bound_max[a]);
+            if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+                return Err(format!("bounds of axis {a} must be finite with max > min"));
+            }
+        }
+        if self.sets == 0 || self.sets & !(SET_STATIC | SET_DYNAMIC) != 0 {
+            return Err(format!("set mask {:#x}", self.sets));
+        }
+        let mut width = 0;
+        for g in groups_in(self.groups) {
+            let w = g.width(sh_degree, lang_width);
+            if w == 0 {
+                return Err(format!("group {} does not exist in this scene", g.name()));
+            }
+            width += w;
+        }
+        if width == 0 {
+            return Err("the residual changes no attribute".into());
+        }
+        self.mlp.check()?;
+        if self.mlp.inputs != c.input_width() || self.mlp.outputs != width {
+            return Err(format!(
+                "MLP is {} -> {}, the grids give {} inputs and the groups take {} outputs",
+                self.mlp.inputs,
+                self.mlp.outputs,
+                c.input_width(),
+                width
+            ));
+        }
+        if self.mlp.params().any(|v| !v.is_finite()) {
+            return Err("MLP weights must be finite".into());
+        }
+        Ok(())
+    }
+
+    fn tables(&self) -> Tables {
+        let f = self.config.features as usize;
+        Tables {
+            planes: self
+                .planes
+                .iter()
+                .map(|bits| entry_masks(bits, f))
+                .collect(),
+            gate: entry_masks(&self.gate, 1),
+        }
+    }
+
+    /// The MLP input of a position, or `None` outside the box (§6.6.3).
+    fn features(&self, t: &Tables, p: [f32; 3], out: &mut [f32]) -> bool {
+        let mut u = [0f32; 3];
+        for a in 0..3 {
+            u[a] = (p[a] - self.bound_min[a]) / (self.bound_max[a] - self.bound_min[a]);
+            if !(0.0..=1.0).contains(&u[a]) {
+                return false;
+            }
+        }
+        let c = &self.config;
+        let nf = c.features as usize;
+        let sign = |bit: bool| if bit { 1.0f32 } else { -1.0 };
+        // Gate: sigmoid of the interpolated gate bit, in f64 then rounded (portable).
+        let mut gv = 0f32;
+        let gsum = lookup::<3>(u, c.gate_resolution, c.gate_table(), |i, w| {
+            gv += w * sign(t.gate[i] != 0)
+        });
+        let gate = (1.0 / (1.0 + (-((gv / gsum) as f64)).exp())) as f32;
+        for (pi, &(a, b)) in PLANES.iter().enumerate() {
+            for (l, &r) in c.resolutions.iter().enumerate() {
+                let tab = &t.planes[pi * c.levels() + l];
+                let o = (pi * c.levels() + l) * nf;
+                let acc = &mut out[o..o + nf];
+                acc.fill(0.0);
+                let s = lookup::<2>([u[a], u[b]], r, c.table(), |i, w| {
+                    let m = tab[i];
+                    for (f, v) in acc.iter_mut().enumerate() {
+                        *v += w * sign(m >> f & 1 == 1);
+                    }
+                });
+                for v in acc.iter_mut() {
+                    *v = *v / s * gate;
+                }
+            }
+        }
+        true
+    }
+
+    /// `out = W2 relu(W1 x + b1) + b2`: each output starts at its bias and takes the fused
+    /// multiply-add of its inputs in order (§6.6.4).
+    fn mlp_into(&self, x: &[f32], hidden: &mut [f32], out: &mut [f32]) {
+        let m = &self.mlp;
+        for (j, h) in hidden.iter_mut().enumerate() {
+            *h = m.b1[j];
+            for (i, &xi) in x.iter().enumerate() {
+                *h = m.w1[j * m.inputs + i].mul_add(xi, *h);
+            }
+        }
+        for (o, v) in out.iter_mut().enumerate() {
+            *v = m.b2[o];
+            for (j, &h) in hidden.iter().enumerate() {
+                *v = m.w2[o * m.hidden + j].mul_add(h.max(0.0), *v);
+            }
+        }
+    }
+
+    /// The residual rows of the given positions: `outputs` values each (zeros outside the
+    /// box). Rows are independent, so the result is the same on any thread count.
+    pub fn residuals_at(&self, positions: &[[f32; 3]]) -> Vec<f32> {
+        const BLOCK: usize = 256;
+        let t = self.tables();
+        let m = &self.mlp;
+        let no = m.outputs;
+        // Transposed weights make the inner loops contiguous; the arithmetic order is that of
+        // §6.6.4 (each output's sum runs over its inputs in order).
+        let w1t = transpose(&m.w1, m.hidden, m.inputs);
+        let w2t = transpose(&m.w2, no, m.hidden);
+        let mut rows = vec![0f32; positions.len() * no];
+        rows.par_chunks_mut(BLOCK * no)
+            .zip(positions.par_chunks(BLOCK))
+            .for_each(|(chunk, pos)| {
+                let mut x = vec![0f32; m.inputs];
+                let mut h = vec![0f32; m.hidden];
+                for (row, &p) in chunk.chunks_mut(no).zip(pos) {
+                    if !self.features(&t, p, &mut x) {
+                        continue;
+                    }
+                    mlp_row(&x, &w1t, &m.b1, &w2t, &m.b2, &mut h, row);
+                }
+            });
+        rows
+    }
+
+    /// Residual row of one position with the plain row-major arithmetic of §6.6.4 (a second,
+    /// independent evaluation for tests and tools).
+    pub fn residual_at(&self, p: [f32; 3]) -> Vec<f32> {
+        let t = self.tables();
+        let mut x = vec![0f32; self.mlp.inputs];
+        let mut h = vec![0f32; self.mlp.hidden];
+        let mut out = vec![0f32; self.mlp.outputs];
+        if self.features(&t, p, &mut x) {
+            self.mlp_into(&x, &mut h, &mut out);
+        }
+        out
+    }
+
+    /// The canonical state this field produces from `reference` (§6.6.5).
+    pub fn apply(&self, reference: &Canonical) -> Result<Canonical> {
+        let s = &reference.statics;
+        self.validate(s.sh_degree, s.lang_width).map_err(invalid)?;
+        let mut out = reference.clone();
+        for (set, bit) in [
+            (&mut out.statics, SET_STATIC),
+            (&mut out.dynamics, SET_DYNAMIC),
+        ] {
+            if self.sets & bit == 0 {
+                continue;
+            }
+            let rows = self.residuals_at(&set.positions);
+            let no = self.mlp.outputs;
+            for i in 0..set.len() {
+                let row = &rows[i * no..(i + 1) * no];
+                let mut col = 0;
+                for g in groups_in(self.groups) {
+                    let v = g.values_mut(set, i);
+                    for (x, d) in v.iter_mut().zip(&row[col..]) {
+                        *x += d;
+                    }
+                    col += v.len();
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// One MLP row with transposed weights (`w1t[i * hidden + j]`, `w2t[j * outputs + o]`): the
+/// same fused multiply-adds in the same order as [`NtcField::mlp_into`], vectorised across
+/// outputs. Compiled for several CPUs and picked at run time; `mul_add` is exact everywhere,
+/// so every path gives the same bits.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn mlp_row(
+    x: &[f32],
+    w1t: &[f32],
+    b1: &[f32],
+    w2t: &[f32],
+    b2: &[f32],
+    h: &mut [f32],
+    out: &mut [f32],
+) {
+    let (nh, no) = (h.len(), out.len());
+    h.copy_from_slice(b1);
+    for (i, &xi) in x.iter().enumerate() {
+        for (hj, &w) in h.iter_mut().zip(&w1t[i * nh..(i + 1) * nh]) {
+            *hj = w.mul_add(xi, *hj);
+        }
+    }
+    out.copy_from_slice(b2);
+    for (j, &hj) in h.iter().enumerate() {
+        let hj = hj.max(0.0);
+        for (v, &w) in out.iter_mut().zip(&w2t[j * no..(j + 1) * no]) {
+            *v = w.mul_add(hj, *v);
+        }
+    }
+}
+
+/// One byte per entry holding its `f` feature bits (bit k = feature k).
+fn entry_masks(bits: &BitSlice<u64, Lsb0>, f: usize) -> Vec<u8> {
+    let n = bits.len() / f;
+    if 64 % f == 0 {
+        // Entries never straddle a word: shift them out of the raw words directly.
+        let words = bits.domain().region().map_or(&[][..], |(_, body, _)| body);
+        if words.len() * 64 == bits.len() {
+            let mask = ((1u16 << f) - 1) as u64;
+            return (0..n)
+                .map(|e| (words[e * f / 64] >> (e * f % 64) & mask) as u8)
+                .collect();
+        }
+    }
+    bits.chunks_exact(f).map(|e| e.load_le::<u8>()).collect()
+}
+
+fn transpose(w: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    let mut t = vec![0f32; w.len()];
+    for r in 0..rows {
+        for c in 0..cols {
+            t[c * rows + r] = w[r * cols + c];
+        }
+    }
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lookup_drops_border_corners_and_renormalises() {
+        // u = 0 on a resolution-4 grid: pos = 0.5, corners 0 (dropped) and 1 (kept).
+        let mut seen = Vec::new();
+        let s = lookup::<1>([0.0], 4, 1 << 10, |i, w| seen.push((i, w)));
+        assert_eq!(seen, vec![(1, 0.5)]);
+        assert!((s - 0.5).abs() < 1e-6);
+        // Interior point: both corners kept, weights sum to 1.
+        seen.clear();
+        let s = lookup::<1>([0.5], 4, 1 << 10, |i, w| seen.push((i, w)));
+        assert_eq!(seen.len(), 2);
+        assert!((s - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn hashed_index_uses_xor_of_prime_products() {
+        let mut seen = Vec::new();
+        // 100^2 > 16 entries: hashed.
+        lookup::<2>([0.5, 0.5], 100, 16, |i, _| seen.push(i));
+        // pos = 0.5*98+0.5 = 49.5: corners (49|50, 49|50).
+        let h = |x: u32, y: u32| (x ^ y.wrapping_mul(PRIMES[1])) as usize % 16;
+        assert_eq!(seen, vec![h(49, 49), h(50, 49), h(49, 50), h(50, 50)]);
+    }
+}

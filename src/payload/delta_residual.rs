@@ -1,0 +1,221 @@
+//! `RDLT`: explicit residual, quantised per-attribute deltas against the reference GOP
+//! (format-spec §6.7). Each channel's integer deltas are offset by their minimum and coded with
+//! the sorted-grid channel coder (§6.5.3) when they fit 16 bits, else as byte-planed zstd.
+
+use crate::bytes::{ByteReader, PutLe};
+use crate::container::{ChunkType, SceneHeader};
+use crate::error::{Error, ErrorKind, Result};
+use crate::limits::Limits;
+use crate::model::residual::{AttrGroup, DeltaGroup, DeltaMode, DeltaResidual};
+use crate::payload::grid_coder::{self, GridCodec};
+use crate::payload::sorted_grid::grid_width;
+
+/// Channel codec id for deltas wider than 16 bits.
+const WIDE: u8 = 3;
+const GROUP_HEADER_LEN: usize = 12;
+
+fn bits_for(span: u64) -> u8 {
+    (64 - span.leading_zeros()).max(1) as u8
+}
+
+/// Code one channel (`n` deltas).
+fn encode_channel(out: &mut Vec<u8>, k: &[i32], zstd_level: i32) {
+    let kmin = k.iter().copied().min().unwrap_or(0);
+    let kmax = k.iter().copied().max().unwrap_or(0);
+    let span = (kmax as i64 - kmin as i64) as u64;
+    let u = |v: i32| (v as i64 - kmin as i64) as u32;
+    out.put_u32(kmin as u32);
+    let (codec, bits, data) = if span < 1 << 16 {
+        let bits = bits_for(span);
+        let q: Vec<u16> = k.iter().map(|&v| u(v) as u16).collect();
+        let (c, d) = grid_coder::encode_best(&q, grid_width(k.len()), bits, zstd_level);
+        (c as u8, bits, d)
+    } else {
+        // Byte planes: all low bytes, then the next, ... so zstd sees runs.
+        let mut planes = Vec::with_capacity(k.len() * 4);
+        for b in 0..4 {
+            planes.extend(k.iter().map(|&v| (u(v) >> (8 * b)) as u8));
+        }
+        let z = zstd::bulk::compress(&planes, zstd_level).expect("zstd of a memory buffer");
+        (WIDE, 32, z)
+    };
+    out.put_u8(codec);
+    out.put_u8(bits);
+    out.put_u16(0);
+    out.put_u32(data.len() as u32);
+    out.extend_from_slice(&data);
+}
+
+/// Encode a residual for a scene with this layout.
+pub fn encode(d: &DeltaResidual, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<u8>> {
+    let lw = scene.lang_width();
+    let counts = [scene.n_static as usize, scene.n_dynamic as usize];
+    let mut out = Vec::new();
+    out.put_u8(d.groups.len() as u8);
+    out.extend_from_slice(&[0, 0, 0]);
+    for g in &d.groups {
+        let w = g.group.width(scene.sh_degree, lw);
+        if w == 0
+            || g.statics.len() != counts[0] * w
+            || g.dynamics.len() != counts[1] * w
+            || d.groups.iter().filter(|h| h.group == g.group).count() > 1
+        {
+            return Err(Error::new(
+                ErrorKind::InvalidInput(format!(
+                    "RDLT group {} does not match the scene",
+                    g.group.name()
+                )),
+                0,
+            ));
+        }
+        out.put_u8(g.group as u8);
+        let (mode, step, bound) = match g.mode {
+            DeltaMode::Exact => (0u8, 0.0, 0.0),
+            DeltaMode::Quantised { step, bound } => (1, step, bound),
+        };
+        out.put_u8(mode);
+        out.put_u16(0);
+        out.put_f32(step);
+        out.put_f32(bound);
+    }
+    for g in &d.groups {
+        let w = g.group.width(scene.sh_degree, lw);
+        for (k, n) in [(&g.statics, counts[0]), (&g.dynamics, counts[1])] {
+            let mut col = vec![0i32; n];
+            for c in 0..w {
+                for (i, v) in col.iter_mut().enumerate() {
+                    *v = k[i * w + c];
+                }
+                encode_channel(&mut out, &col, zstd_level);
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn bad(reason: String, at: u64) -> Error {
+    Error::new(
+        ErrorKind::Payload {
+            chunk: ChunkType::RDLT,
+            reason,
+        },
+        at,
+    )
+}
+
+fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i32>> {
+    let at = r.offset();
+    let kmin = r.u32("RDLT channel minimum")? as i32;
+    let codec = r.u8("RDLT channel codec")?;
+    let bits = r.u8("RDLT channel bits")?;
+    r.u16("RDLT reserved")?;
+    let len = r.u32("RDLT channel length")? as usize;
+    let data_at = r.offset();
+    let data = r.take(len, "RDLT channel data")?;
+    limits.check_alloc("RDLT channel", n as u64 * 4, at)?;
+    // Modulo 2^32, as §6.7.2 states: a damaged minimum wraps instead of failing.
+    let from = |u: u32| (kmin as i64 + u as i64) as i32;
+    if codec == WIDE {
+        if bits != 32 {
+            return Err(bad(format!("wide channel with {bits} bits"), at));
+        }
+        let raw = crate::bytes::zstd_exact(data, n as u64 * 4, data_at)?;
+        return Ok((0..n)
+            .map(|i| {
+                from(u32::from_le_bytes([
+                    raw[i],
+                    raw[n + i],
+                    raw[2 * n + i],
+                    raw[3 * n + i],
+                ]))
+            })
+            .collect());
+    }
+    let codec = GridCodec::from_u8(codec)
+        .ok_or_else(|| bad(format!("unknown channel codec {codec}"), at))?;
+    if !(1..=16).contains(&bits) {
+        return Err(bad(format!("{bits}-bit channel (1..=16)"), at));
+    }
+    let q = grid_coder::decode(
+        codec,
+        ByteReader::new(data, data_at),
+        n,
+        grid_width(n),
+        bits,
+    )
+    .map_err(|e| match e.kind {
+        ErrorKind::Payload { reason, .. } => bad(reason, e.offset),
+        _ => e,
+    })?;
+    Ok(q.into_iter().map(|v| from(v as u32)).collect())
+}
+
+/// Decode an `RDLT` payload starting at file offset `offset`.
+pub fn decode(
+    p: &[u8],
+    offset: u64,
+    scene: &SceneHeader,
+    limits: &Limits,
+) -> Result<DeltaResidual> {
+    let mut r = ByteReader::new(p, offset);
+    let count = r.u8("RDLT group count")? as usize;
+    r.take(3, "RDLT reserved")?;
+    let lw = scene.lang_width();
+    let mut heads = Vec::with_capacity(count);
+    for _ in 0..count {
+        let at = r.offset();
+        let head = r.take(GROUP_HEADER_LEN, "RDLT group header")?;
+        let group = AttrGroup::from_u8(head[0])
+            .ok_or_else(|| bad(format!("unknown attribute group {}", head[0]), at))?;
+        if group.width(scene.sh_degree, lw) == 0 {
+            return Err(bad(
+                format!("group {} does not exist in this scene", group.name()),
+                at,
+            ));
+        }
+        if heads.iter().any(|&(g, _)| g == group) {
+            return Err(bad(format!("group {} given twice", group.name()), at));
+        }
+        let f = |o: usize| f32::from_le_bytes(head[o..o + 4].try_into().expect("4 bytes"));
+        let mode = match head[1] {
+            0 => DeltaMode::Exact,
+            1 => {
+                let (step, bound) = (f(4), f(8));
+                if !(step.is_finite() && step > 0.0 && bound.is_finite() && bound >= 0.0) {
+                    return Err(bad(
+                        format!("step {step} / bound {bound} for {}", group.name()),
+                        at + 4,
+                    ));
+                }
+                DeltaMode::Quantised { step, bound }
+            }
+            m => return Err(bad(format!("unknown delta mode {m}"), at + 1)),
+        };
+        heads.push((group, mode));
+    }
+    let counts = [scene.n_static as usize, scene.n_dynamic as usize];
+    let mut groups = Vec::with_capacity(count);
+    for (group, mode) in heads {
+        let w = group.width(scene.sh_degree, lw);
+        let mut sets = [Vec::new(), Vec::new()];
+        for (set, &n) in sets.iter_mut().zip(&counts) {
+            limits.check_alloc("RDLT group", (n * w) as u64 * 4, r.offset())?;
+            let mut k = vec![0i32; n * w];
+            for c in 0..w {
+                let col = decode_channel(&mut r, n, limits)?;
+                for (i, v) in col.into_iter().enumerate() {
+                    k[i * w + c] = v;
+                }
+            }
+            *set = k;
+        }
+        let [statics, dynamics] = sets;
+        groups.push(DeltaGroup {
+            group,
+            mode,
+            statics,
+            dynamics,
+        });
+    }
+    Ok(DeltaResidual { groups })
+}

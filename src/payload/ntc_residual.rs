@@ -1,0 +1,332 @@
+//! `RNTC`: a GOP's binary-voxel residual field (format-spec §6.6): grid shapes, normalisation
+//! box, the binary grids entropy-coded per segment with the stored frequency of +1, and the
+//! MLP weights.
+
+use bitvec::prelude::*;
+use rayon::prelude::*;
+
+use crate::bytes::{ByteReader, PutLe};
+use crate::container::{ChunkType, SceneHeader};
+use crate::error::{Error, ErrorKind, Result};
+use crate::limits::Limits;
+use crate::model::ntc::{NtcConfig, NtcField, NtcMlp};
+use crate::payload::binary_bits;
+
+/// Largest plane level count, log2 table size and feature count a reader accepts (bounds the
+/// work a file can ask for: at most 3 * 8 * 2^20 * 8 bits).
+pub const MAX_LEVELS: usize = 8;
+pub const MAX_LOG2_TABLE: u8 = 20;
+pub const MAX_FEATURES: u8 = 8;
+pub const MAX_HIDDEN: usize = 1024;
+
+/// Where a segment's probability of a 1 bit comes from (§6.6.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrequencyScope {
+    /// Each segment's own count of ones.
+    Segment = 0,
+    /// The count summed over the segment's grid (all plane levels, or the gate).
+    Grid = 1,
+}
+
+/// Segment sizes in bits: `3 * levels` plane levels then the gate.
+fn segment_lengths(c: &NtcConfig) -> Vec<usize> {
+    let mut v = vec![c.level_bits(); 3 * c.levels()];
+    v.push(c.gate_table());
+    v
+}
+
+/// Per segment probability of a 1 bit under `scope`.
+fn probabilities(ones: &[u64], lens: &[usize], scope: FrequencyScope) -> Vec<u32> {
+    let planes = lens.len() - 1;
+    match scope {
+        FrequencyScope::Segment => ones
+            .iter()
+            .zip(lens)
+            .map(|(&o, &n)| binary_bits::probability_of_one(o, n as u64))
+            .collect(),
+        FrequencyScope::Grid => {
+            let po: u64 = ones[..planes].iter().sum();
+            let pn: u64 = lens[..planes].iter().map(|&n| n as u64).sum();
+            let mut p = vec![binary_bits::probability_of_one(po, pn); planes];
+            p.push(binary_bits::probability_of_one(
+                ones[planes],
+                lens[planes] as u64,
+            ));
+            p
+        }
+    }
+}
+
+fn code_segments(
+    segs: &[&BitSlice<u64, Lsb0>],
+    ones: &[u64],
+    scope: FrequencyScope,
+) -> Vec<Vec<u32>> {
+    let lens: Vec<usize> = segs.iter().map(|s| s.len()).collect();
+    let p = probabilities(ones, &lens, scope);
+    segs.par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            if ones[i] == 0 || ones[i] == lens[i] as u64 {
+                Vec::new()
+            } else {
+                binary_bits::encode(s, p[i])
+            }
+        })
+        .collect()
+}
+
+/// Coded size and entropy bound of the grids, for reports: (coded bytes, bound in bits) per
+/// segment under the scope the encoder picks.
+pub fn grid_report(f: &NtcField) -> (FrequencyScope, Vec<(usize, u64, usize, f64)>) {
+    let segs: Vec<&BitSlice<u64, Lsb0>> = f
+        .planes
+        .iter()
+        .map(|p| p.as_bitslice())
+        .chain([f.gate.as_bitslice()])
+        .collect();
+    let ones: Vec<u64> = segs.iter().map(|s| s.count_ones() as u64).collect();
+    let (scope, coded) = best_coding(&segs, &ones);
+    let rows = segs
+        .iter()
+        .zip(&ones)
+        .zip(&coded)
+        .map(|((s, &o), c)| {
+            (
+                s.len(),
+                o,
+                c.len() * 4,
+                binary_bits::entropy_bits(o, s.len() as u64),
+            )
+        })
+        .collect();
+    (scope, rows)
+}
+
+fn best_coding(segs: &[&BitSlice<u64, Lsb0>], ones: &[u64]) -> (FrequencyScope, Vec<Vec<u32>>) {
+    let a = code_segments(segs, ones, FrequencyScope::Segment);
+    let b = code_segments(segs, ones, FrequencyScope::Grid);
+    let size = |v: &Vec<Vec<u32>>| v.iter().map(Vec::len).sum::<usize>();
+    if size(&b) < size(&a) {
+        (FrequencyScope::Grid, b)
+    } else {
+        (FrequencyScope::Segment, a)
+    }
+}
+
+/// Encode a field. The weights are stored as f32, zstd-compressed.
+pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<u8>> {
+    f.validate(scene.sh_degree, scene.lang_width())
+        .map_err(|e| Error::new(ErrorKind::InvalidInput(format!("RNTC: {e}")), 0))?;
+    let c = &f.config;
+    if c.levels() > MAX_LEVELS
+        || c.log2_table > MAX_LOG2_TABLE
+        || c.gate_log2_table > MAX_LOG2_TABLE
+        || c.features > MAX_FEATURES
+        || f.mlp.hidden > MAX_HIDDEN
+    {
+        return Err(Error::new(
+            ErrorKind::InvalidInput("RNTC: grid or MLP larger than §6.6 allows".into()),
+            0,
+        ));
+    }
+    let segs: Vec<&BitSlice<u64, Lsb0>> = f
+        .planes
+        .iter()
+        .map(|p| p.as_bitslice())
+        .chain([f.gate.as_bitslice()])
+        .collect();
+    let ones: Vec<u64> = segs.iter().map(|s| s.count_ones() as u64).collect();
+    let (scope, coded) = best_coding(&segs, &ones);
+
+    let mut out = Vec::new();
+    out.put_u8(f.groups);
+    out.put_u8(f.sets);
+    out.put_u8(c.features);
+    out.put_u8(c.log2_table);
+    out.put_u8(c.gate_log2_table);
+    out.put_u8(c.levels() as u8);
+    out.put_u8(scope as u8);
+    out.put_u8(0);
+    out.put_f32s(&f.bound_min);
+    out.put_f32s(&f.bound_max);
+    out.put_u32(c.gate_resolution);
+    for &r in &c.resolutions {
+        out.put_u32(r);
+    }
+    out.put_u16(f.mlp.hidden as u16);
+    out.put_u16(f.mlp.outputs as u16);
+    for (o, w) in ones.iter().zip(&coded) {
+        out.put_u32(*o as u32);
+        out.put_u32((w.len() * 4) as u32);
+    }
+    for w in &coded {
+        for &x in w {
+            out.put_u32(x);
+        }
+    }
+    let mut raw = Vec::new();
+    for v in f.mlp.params() {
+        raw.put_f32(*v);
+    }
+    let z = zstd::bulk::compress(&raw, zstd_level)
+        .map_err(|e| Error::new(ErrorKind::Io(e.to_string()), 0))?;
+    out.put_u32(z.len() as u32);
+    out.extend_from_slice(&z);
+    Ok(out)
+}
+
+fn bad(reason: String, at: u64) -> Error {
+    Error::new(
+        ErrorKind::Payload {
+            chunk: ChunkType::RNTC,
+            reason,
+        },
+        at,
+    )
+}
+
+/// Decode an `RNTC` payload that starts at file offset `offset`.
+pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<NtcField> {
+    let mut r = ByteReader::new(p, offset);
+    let groups = r.u8("RNTC groups")?;
+    let sets = r.u8("RNTC sets")?;
+    let at = r.offset();
+    let features = r.u8("RNTC features")?;
+    let log2_table = r.u8("RNTC log2 table")?;
+    let gate_log2_table = r.u8("RNTC gate log2 table")?;
+    let levels = r.u8("RNTC levels")? as usize;
+    if !(1..=MAX_FEATURES).contains(&features)
+        || !(1..=MAX_LOG2_TABLE).contains(&log2_table)
+        || !(1..=MAX_LOG2_TABLE).contains(&gate_log2_table)
+        || !(1..=MAX_LEVELS).contains(&levels)
+    {
+        return Err(bad(
+            format!(
+                "grid shape out of range: {features} features, log2 table {log2_table}, \
+                 gate log2 table {gate_log2_table}, {levels} levels"
+            ),
+            at,
+        ));
+    }
+    let at = r.offset();
+    let scope = match r.u8("RNTC frequency scope")? {
+        0 => FrequencyScope::Segment,
+        1 => FrequencyScope::Grid,
+        v => return Err(bad(format!("unknown frequency scope {v}"), at)),
+    };
+    r.u8("RNTC reserved")?;
+    let mut bmin = [0f32; 3];
+    let mut bmax = [0f32; 3];
+    for v in bmin.iter_mut().chain(bmax.iter_mut()) {
+        *v = r.finite_f32("RNTC bounds")?;
+    }
+    let gate_resolution = r.u32("RNTC gate resolution")?;
+    let mut resolutions = Vec::with_capacity(levels);
+    for _ in 0..levels {
+        resolutions.push(r.u32("RNTC resolution")?);
+    }
+    let at = r.offset();
+    let hidden = r.u16("RNTC hidden width")? as usize;
+    let outputs = r.u16("RNTC output width")? as usize;
+    if hidden == 0 || hidden > MAX_HIDDEN {
+        return Err(bad(format!("hidden width {hidden} (1..={MAX_HIDDEN})"), at));
+    }
+    let config = NtcConfig {
+        resolutions,
+        features,
+        log2_table,
+        gate_resolution,
+        gate_log2_table,
+    };
+    let lens = segment_lengths(&config);
+    let total_bits: u64 = lens.iter().map(|&n| n as u64).sum();
+    limits.check_alloc("RNTC grid bits", total_bits / 8, at)?;
+    let mut ones = Vec::with_capacity(lens.len());
+    let mut sizes = Vec::with_capacity(lens.len());
+    for &n in &lens {
+        let at = r.offset();
+        let o = r.u32("RNTC segment ones")? as u64;
+        let s = r.u32("RNTC segment bytes")? as usize;
+        if o > n as u64 {
+            return Err(bad(format!("{o} ones in a segment of {n} bits"), at));
+        }
+        let constant = o == 0 || o == n as u64;
+        if !s.is_multiple_of(4) || (constant && s != 0) || (!constant && s == 0) {
+            return Err(bad(
+                format!("segment of {s} bytes for {o} ones of {n} bits"),
+                at,
+            ));
+        }
+        ones.push(o);
+        sizes.push(s);
+    }
+    let probs = probabilities(&ones, &lens, scope);
+    let mut streams = Vec::with_capacity(lens.len());
+    for &s in &sizes {
+        let at = r.offset();
+        let b = r.take(s, "RNTC segment words")?;
+        streams.push((at, b));
+    }
+    let segs: Vec<BitVec<u64, Lsb0>> = streams
+        .par_iter()
+        .enumerate()
+        .map(|(i, &(at, b))| {
+            let n = lens[i];
+            if ones[i] == 0 || ones[i] == n as u64 {
+                return Ok(BitVec::repeat(ones[i] != 0, n));
+            }
+            let words = b
+                .chunks_exact(4)
+                .map(|w| u32::from_le_bytes(w.try_into().expect("4 bytes")))
+                .collect();
+            let bits = binary_bits::decode(words, n, probs[i])
+                .ok_or_else(|| bad(format!("segment {i}: invalid range-coder stream"), at))?;
+            if bits.count_ones() as u64 != ones[i] {
+                return Err(bad(
+                    format!(
+                        "segment {i} decodes to {} ones, {} stored",
+                        bits.count_ones(),
+                        ones[i]
+                    ),
+                    at,
+                ));
+            }
+            Ok(bits)
+        })
+        .collect::<Result<_>>()?;
+    let inputs = config.input_width();
+    let params = inputs * hidden + hidden + hidden * outputs + outputs;
+    let at = r.offset();
+    let zlen = r.u32("RNTC weights length")? as usize;
+    let z = r.take(zlen, "RNTC weights")?;
+    limits.check_alloc("RNTC weights", params as u64 * 4, at)?;
+    let raw = crate::bytes::zstd_exact(z, params as u64 * 4, at + 4)?;
+    let mut w = ByteReader::new(&raw, at + 4);
+    let mut take = |n| w.f32_vec(n, "RNTC weights");
+    let mlp = NtcMlp {
+        inputs,
+        hidden,
+        outputs,
+        w1: take(inputs * hidden)?,
+        b1: take(hidden)?,
+        w2: take(hidden * outputs)?,
+        b2: take(outputs)?,
+    };
+    let mut segs = segs;
+    let gate = segs.pop().expect("gate segment");
+    let field = NtcField {
+        config,
+        bound_min: bmin,
+        bound_max: bmax,
+        planes: segs,
+        gate,
+        mlp,
+        groups,
+        sets,
+    };
+    field
+        .validate(scene.sh_degree, scene.lang_width())
+        .map_err(|e| bad(e, offset))?;
+    Ok(field)
+}
