@@ -49,4 +49,13 @@ for t in 0.5 1.2345; do
 done
 fb=$($B info "$OUT/dynamic.dlgs" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print(round(d["bytes_per_frame"]), d["chunk_bytes_by_type"]["TFEA"] // d["header"]["frame_count"])')
 echo "RD summary (dynamic): bytes/frame total and of the time-feature stream: $fb"
+echo "== residuals: 5 GOPs of 60 frames on the real lod2 tile, GOPs 1-4 carry GENERATED binary voxel residual fields (RNTC), parallel mode"
+LOD2="$DATA/ply/gs3d-fork_lod2_tile_0_6831_sh3.ply"
+$B synth "$LOD2" -o "$OUT/residual_exact.dlgs" --gops 5 --residual-mode parallel --exact-features
+$B encode "$OUT/residual_exact.dlgs" -o "$OUT/residual.dlgs"
+$B info "$OUT/residual.dlgs" | tail -6
+echo "== PSNR at GOP boundaries (decoded vs model) and the jump across each boundary"
+$B boundaries "$OUT/residual_exact.dlgs" "$OUT/residual.dlgs" --orbit 4 --width 676 --height 507
+echo "== seek latency"
+$B seek "$OUT/residual.dlgs" --count 10
 echo "outputs in $OUT/"

@@ -64,6 +64,12 @@ pub struct CodecArgs {
     /// sh_rest, opacity, lang_opacity, lang). Unlisted groups are exact (bit-identical).
     #[arg(long)]
     pub residual_error: Option<String>,
+    /// Binary voxel residual fields (RNTC) of the input: `keep` them, `recode` residual GOPs
+    /// as explicit residuals against the input's decoded states, or `auto` (default): keep
+    /// when the canonical coding is lossless; recode when it is lossy, because a field is a
+    /// function of position and GOP 0's quantised positions would query it elsewhere.
+    #[arg(long, default_value = "auto")]
+    pub ntc: String,
 }
 
 /// `intra`, `sequential` or `parallel` (format-spec §4.1).
@@ -117,6 +123,9 @@ impl CodecArgs {
 
     fn residual(&self) -> Result<ResidualConfig> {
         let mut cfg = ResidualConfig::default();
+        // Lossy canonical coding without explicit bounds: residual GOPs as lossy as GOP 0.
+        cfg.follow_quantisation =
+            self.residual_error.is_none() && !matches!(self.canonical()?, CanonicalCodec::Raw);
         for kv in self
             .residual_error
             .as_deref()
@@ -234,13 +243,19 @@ pub fn run_encode(
     if let Some(m) = residual_mode {
         scene.residual_mode = parse_residual_mode(m)?;
     }
+    let keep_ntc = match codec.ntc.as_str() {
+        "keep" => true,
+        "recode" => false,
+        "auto" => matches!(codec.canonical()?, CanonicalCodec::Raw),
+        v => bail!("--ntc {v}: expected keep, recode or auto"),
+    };
     let mut enc = StreamEncoder::new(out, scene.clone(), codec.config(meta(input, settings))?)?;
     let pb = bar(scene.gop_count as u64, "encoding");
     for g in 0..scene.gop_count {
         let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;
         // A binary voxel residual is kept as it is when the reference structure is unchanged
         // (it is the model's own representation); otherwise the decoded state is re-coded.
-        let canonical = match (&gop.ntc, scene.residual_mode == input_mode) {
+        let canonical = match (&gop.ntc, scene.residual_mode == input_mode && keep_ntc) {
             (Some(f), true) => GopCanonical::Ntc(f),
             _ => GopCanonical::State(&gop.canonical),
         };

@@ -60,6 +60,10 @@ pub enum GopCanonical<'a> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ResidualConfig {
     pub groups: Vec<(AttrGroup, DeltaTarget)>,
+    /// With sorted-grid canonical coding, replace `groups` by bounds of half a quantisation
+    /// step of the canonical codec's bits over each group's range in the GOP (the error GOP 0
+    /// already has), so residual GOPs are as lossy as the first one, not more exact.
+    pub follow_quantisation: bool,
 }
 
 impl Default for ResidualConfig {
@@ -70,8 +74,52 @@ impl Default for ResidualConfig {
                 .into_iter()
                 .map(|g| (g, DeltaTarget::Exact))
                 .collect(),
+            follow_quantisation: false,
         }
     }
+}
+
+/// Error bounds matching sorted-grid quantisation at `bits` for the values of `c`: half a
+/// step over each group's range (for opacities, quantised after the sigmoid, half a step at
+/// the sigmoid's steepest point). Constant groups are exact.
+pub fn bounds_like_quantisation(bits: &QuantBits, c: &Canonical) -> Vec<(AttrGroup, DeltaTarget)> {
+    AttrGroup::ALL
+        .into_iter()
+        .map(|g| {
+            let b = match g {
+                AttrGroup::Position => bits.position,
+                AttrGroup::LogScale => bits.log_scale,
+                AttrGroup::Rotation => bits.rotation,
+                AttrGroup::ShDc => bits.sh_dc,
+                AttrGroup::ShRest => bits.sh_rest,
+                AttrGroup::Opacity | AttrGroup::LangOpacity => bits.opacity,
+                AttrGroup::Lang => bits.lang,
+            };
+            let levels = (1u32 << b) as f32;
+            if matches!(g, AttrGroup::Opacity | AttrGroup::LangOpacity) {
+                // d logit / d sigmoid = 4 at 0.5: a sigmoid step of 1/levels.
+                return (g, DeltaTarget::Bound(2.0 / levels));
+            }
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for set in [&c.statics, &c.dynamics] {
+                for i in 0..set.len() {
+                    if g.width(set.sh_degree, set.lang_width) == 0 {
+                        break;
+                    }
+                    for &v in g.values(set, i) {
+                        lo = lo.min(v);
+                        hi = hi.max(v);
+                    }
+                }
+            }
+            let range = hi - lo;
+            if range.is_finite() && range > 0.0 {
+                (g, DeltaTarget::Bound(range / (2.0 * levels)))
+            } else {
+                (g, DeltaTarget::Exact)
+            }
+        })
+        .collect()
 }
 
 /// Encoder settings.
@@ -205,7 +253,13 @@ impl<W: Write> StreamEncoder<W> {
                         },
                         None => target.clone(),
                     };
-                    let r = DeltaResidual::compute(&target, base, &self.cfg.residual.groups)?;
+                    let groups = match (self.cfg.residual.follow_quantisation, self.cfg.canonical) {
+                        (true, CanonicalCodec::Sorted { bits, .. }) => {
+                            bounds_like_quantisation(&bits, &target)
+                        }
+                        _ => self.cfg.residual.groups.clone(),
+                    };
+                    let r = DeltaResidual::compute(&target, base, &groups)?;
                     let payload = delta_residual::encode(&r, &s, self.cfg.zstd_level)?;
                     (ChunkType::RDLT, payload, Some(r.apply(base)))
                 }

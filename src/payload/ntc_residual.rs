@@ -76,9 +76,20 @@ fn code_segments(
         .collect()
 }
 
-/// Coded size and entropy bound of the grids, for reports: (coded bytes, bound in bits) per
-/// segment under the scope the encoder picks.
-pub fn grid_report(f: &NtcField) -> (FrequencyScope, Vec<(usize, u64, usize, f64)>) {
+/// One row of [`grid_report`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentReport {
+    pub bits: usize,
+    pub ones: u64,
+    /// Coded bytes with the segment's own frequency and with its grid's.
+    pub bytes_segment: usize,
+    pub bytes_grid: usize,
+    /// `n H(ones / n)` in bits.
+    pub entropy_bits: f64,
+}
+
+/// Coded size of every segment under both frequency scopes, and the entropy bound.
+pub fn grid_report(f: &NtcField) -> Vec<SegmentReport> {
     let segs: Vec<&BitSlice<u64, Lsb0>> = f
         .planes
         .iter()
@@ -86,21 +97,18 @@ pub fn grid_report(f: &NtcField) -> (FrequencyScope, Vec<(usize, u64, usize, f64
         .chain([f.gate.as_bitslice()])
         .collect();
     let ones: Vec<u64> = segs.iter().map(|s| s.count_ones() as u64).collect();
-    let (scope, coded) = best_coding(&segs, &ones);
-    let rows = segs
-        .iter()
-        .zip(&ones)
-        .zip(&coded)
-        .map(|((s, &o), c)| {
-            (
-                s.len(),
-                o,
-                c.len() * 4,
-                binary_bits::entropy_bits(o, s.len() as u64),
-            )
+    let a = code_segments(&segs, &ones, FrequencyScope::Segment);
+    let b = code_segments(&segs, &ones, FrequencyScope::Grid);
+    segs.iter()
+        .enumerate()
+        .map(|(i, s)| SegmentReport {
+            bits: s.len(),
+            ones: ones[i],
+            bytes_segment: a[i].len() * 4,
+            bytes_grid: b[i].len() * 4,
+            entropy_bits: binary_bits::entropy_bits(ones[i], s.len() as u64),
         })
-        .collect();
-    (scope, rows)
+        .collect()
 }
 
 fn best_coding(segs: &[&BitSlice<u64, Lsb0>], ones: &[u64]) -> (FrequencyScope, Vec<Vec<u32>>) {

@@ -284,6 +284,7 @@ fn residual_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
                     _ => (g, DeltaTarget::Exact),
                 })
                 .collect(),
+            follow_quantisation: false,
         },
         ..Default::default()
     };

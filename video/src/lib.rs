@@ -179,6 +179,9 @@ pub fn decode_gray12(
     let mut opts = ff::Dictionary::new();
     let max_pixels = (width as u64 + 128) * (height as u64 + 128);
     opts.set("max_pixels", &max_pixels.to_string());
+    // Frame and wavefront threads (x265 writes WPP streams); HEVC decoding is bit-exact, so
+    // the thread count cannot change the features.
+    opts.set("threads", "auto");
     let mut dec = ctx
         .decoder()
         .open_as_with(codec, opts)
