@@ -122,10 +122,12 @@ impl CodecArgs {
     }
 
     fn residual(&self) -> Result<ResidualConfig> {
-        let mut cfg = ResidualConfig::default();
         // Lossy canonical coding without explicit bounds: residual GOPs as lossy as GOP 0.
-        cfg.follow_quantisation =
-            self.residual_error.is_none() && !matches!(self.canonical()?, CanonicalCodec::Raw);
+        let mut cfg = ResidualConfig {
+            follow_quantisation: self.residual_error.is_none()
+                && !matches!(self.canonical()?, CanonicalCodec::Raw),
+            ..Default::default()
+        };
         for kv in self
             .residual_error
             .as_deref()
