@@ -274,6 +274,32 @@ fn seeking_in_any_order_gives_the_frames_of_playback() {
 }
 
 #[test]
+fn a_five_gop_stream_plays_every_frame_start_to_end() {
+    let m = model(ResidualMode::Sequential, 5);
+    let bytes = write_model(&m, exact_cfg(), Vec::new()).unwrap();
+    let mut d = open(&bytes);
+    let mut frame = dlgs::Gaussians::default();
+    let mut gops_seen = Vec::new();
+    for f in 0..m.scene.frame_count {
+        let t = (f as f64 + 0.5) / 30.0;
+        let fr = d.frame_at_reusing(t, &opts(), frame).unwrap();
+        assert_eq!(fr.time.frame, f);
+        assert_eq!(fr.dynamics.len(), m.scene.n_dynamic as usize);
+        assert!(fr
+            .dynamics
+            .positions
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite()));
+        if gops_seen.last() != Some(&fr.time.gop) {
+            gops_seen.push(fr.time.gop);
+        }
+        frame = fr.dynamics;
+    }
+    assert_eq!(gops_seen, vec![0, 1, 2, 3, 4]);
+}
+
+#[test]
 fn explicit_residuals_are_exact_or_within_their_declared_bounds() {
     // An intra model whose GOPs differ (the residual model's states, stored in full)
     // re-encoded as a sequential stream with explicit residuals.
