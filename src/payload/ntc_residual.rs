@@ -88,15 +88,21 @@ pub struct SegmentReport {
     pub entropy_bits: f64,
 }
 
-/// Coded size of every segment under both frequency scopes, and the entropy bound.
-pub fn grid_report(f: &NtcField) -> Vec<SegmentReport> {
+/// The field's segments in storage order (plane levels, then the gate) and their counts of ones.
+fn segments(f: &NtcField) -> (Vec<&BitSlice<u64, Lsb0>>, Vec<u64>) {
     let segs: Vec<&BitSlice<u64, Lsb0>> = f
         .planes
         .iter()
         .map(|p| p.as_bitslice())
         .chain([f.gate.as_bitslice()])
         .collect();
-    let ones: Vec<u64> = segs.iter().map(|s| s.count_ones() as u64).collect();
+    let ones = segs.iter().map(|s| s.count_ones() as u64).collect();
+    (segs, ones)
+}
+
+/// Coded size of every segment under both frequency scopes, and the entropy bound.
+pub fn grid_report(f: &NtcField) -> Vec<SegmentReport> {
+    let (segs, ones) = segments(f);
     let a = code_segments(&segs, &ones, FrequencyScope::Segment);
     let b = code_segments(&segs, &ones, FrequencyScope::Grid);
     segs.iter()
@@ -138,13 +144,7 @@ pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<
             0,
         ));
     }
-    let segs: Vec<&BitSlice<u64, Lsb0>> = f
-        .planes
-        .iter()
-        .map(|p| p.as_bitslice())
-        .chain([f.gate.as_bitslice()])
-        .collect();
-    let ones: Vec<u64> = segs.iter().map(|s| s.count_ones() as u64).collect();
+    let (segs, ones) = segments(f);
     let (scope, coded) = best_coding(&segs, &ones);
 
     let mut out = Vec::new();
@@ -303,6 +303,16 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             Ok(bits)
         })
         .collect::<Result<_>>()?;
+    // The output width follows from the groups: check it before sizing the weights.
+    let width: usize = crate::model::ntc::groups_in(groups)
+        .map(|g| g.width(scene.sh_degree, scene.lang_width()))
+        .sum();
+    if outputs != width {
+        return Err(bad(
+            format!("output width {outputs}, the selected groups take {width}"),
+            at,
+        ));
+    }
     let inputs = config.input_width();
     let params = inputs * hidden + hidden + hidden * outputs + outputs;
     let at = r.offset();

@@ -215,13 +215,19 @@ pub const FRAME_CAMERA: [f32; 3] = [0.3, -0.2, -2.5];
 /// Largest absolute difference a conforming decoder may show (format-spec §6.4).
 pub const FRAME_TOLERANCE: f32 = 2e-4;
 
-fn dynamic_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
-    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
-    // The first 512 Gaussians keep the file small; 128 of them move.
+/// The first 512 Gaussians of a scene: small dynamic vectors.
+fn first_512(scene: &dlgs::Gaussians) -> dlgs::Gaussians {
     let mut part = dlgs::Gaussians::new(scene.sh_degree, scene.lang_width);
     for i in 0..512 {
         part.push_from(scene, i);
     }
+    part
+}
+
+fn dynamic_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
+    // The first 512 Gaussians keep the file small; 128 of them move.
+    let part = first_512(scene);
     let spec = SynthSpec {
         dynamic_fraction: 0.25,
         max_dynamic: 128,
@@ -243,10 +249,7 @@ fn residual_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
     use dlgs::model::residual::{AttrGroup, DeltaTarget};
     use dlgs_encoder::synth::{synth_dynamic, synth_ntc, SynthSpec};
     use dlgs_encoder::{GopCanonical, ResidualConfig, StreamEncoder};
-    let mut part = dlgs::Gaussians::new(scene.sh_degree, scene.lang_width);
-    for i in 0..512 {
-        part.push_from(scene, i);
-    }
+    let part = first_512(scene);
     let spec = SynthSpec {
         dynamic_fraction: 0.25,
         max_dynamic: 64,
