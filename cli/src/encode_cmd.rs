@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::container::header::{DeformModel, ResidualMode};
+use dlgs::model::lang_decoder::{LangDecoder, NamedEmbedding};
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs::payload::mlp_weights::WeightType;
 use dlgs::payload::raw_canonical::RawCodec;
@@ -70,6 +71,19 @@ pub struct CodecArgs {
     /// function of position and GOP 0's quantised positions would query it elsewhere.
     #[arg(long, default_value = "auto")]
     pub ntc: String,
+    /// The scene's language autoencoder decoder (safetensors with `decoder.<i>.weight/bias`,
+    /// see docs/queries.md), stored in the file (LAED chunk) so that players can answer text
+    /// queries. When re-encoding a .dlgs, its decoder is kept unless this is given.
+    #[arg(long)]
+    pub lang_decoder: Option<PathBuf>,
+    /// Canonical negative text embeddings (.npy (K, D) or JSON) stored with the decoder
+    /// (the reference uses CLIP's "object", "things", "stuff", "texture").
+    #[arg(long)]
+    pub negatives: Option<PathBuf>,
+    /// Store the language decoder in f32 (default f16: half the bytes; effect on relevance
+    /// in BENCHMARKS.md).
+    #[arg(long)]
+    pub lang_decoder_f32: bool,
 }
 
 /// `intra`, `sequential` or `parallel` (format-spec §4.1).
@@ -185,7 +199,42 @@ impl CodecArgs {
                 WeightType::F32
             },
             residual: self.residual()?,
+            lang_decoder: self.lang_decoder()?,
+            lang_decoder_weights: if self.lang_decoder_f32 {
+                WeightType::F32
+            } else {
+                WeightType::F16
+            },
         })
+    }
+
+    /// The decoder given with `--lang-decoder` (and `--negatives`), if any.
+    fn lang_decoder(&self) -> Result<Option<LangDecoder>> {
+        let Some(path) = &self.lang_decoder else {
+            if self.negatives.is_some() {
+                bail!("--negatives is stored with the language decoder: give --lang-decoder too");
+            }
+            return Ok(None);
+        };
+        let mut d = dlgs_query::decoder_io::load_lang_decoder(path)?;
+        if let Some(n) = &self.negatives {
+            let e = dlgs_query::read_embeddings(n)?;
+            if e.dims != d.embed_dims() {
+                bail!(
+                    "{}: negatives have {} dims, the decoder outputs {}",
+                    n.display(),
+                    e.dims,
+                    d.embed_dims()
+                );
+            }
+            d.negatives = (0..e.count())
+                .map(|i| NamedEmbedding {
+                    name: e.names[i].clone(),
+                    values: e.row(i).to_vec(),
+                })
+                .collect();
+        }
+        Ok(Some(d))
     }
 }
 
@@ -251,7 +300,13 @@ pub fn run_encode(
         "auto" => matches!(codec.canonical()?, CanonicalCodec::Raw),
         v => bail!("--ntc {v}: expected keep, recode or auto"),
     };
-    let mut enc = StreamEncoder::new(out, scene.clone(), codec.config(meta(input, settings))?)?;
+    let mut cfg = codec.config(meta(input, settings))?;
+    if cfg.lang_decoder.is_none() {
+        cfg.lang_decoder = dec
+            .lang_decoder()
+            .with_context(|| format!("reading the language decoder of {}", input.display()))?;
+    }
+    let mut enc = StreamEncoder::new(out, scene.clone(), cfg)?;
     let pb = bar(scene.gop_count as u64, "encoding");
     for g in 0..scene.gop_count {
         let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;

@@ -3,6 +3,7 @@
 mod cameras_arg;
 mod encode_cmd;
 mod info;
+mod query_cmd;
 mod scene_io;
 mod seek_cmd;
 
@@ -114,6 +115,25 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Open-vocabulary query: render the language image at time t, decode it with the scene's
+    /// language decoder, score it against a text embedding and write mask, heat map and
+    /// overlay PNGs (the reference's filtering and thresholds by default).
+    Query(query_cmd::QueryArgs),
+    /// Decode the Gaussians at time t to an INRIA PLY, optionally only those a text query
+    /// selects (3D selection: --select E.npy, --action keep|delete|highlight).
+    Export {
+        file: PathBuf,
+        #[arg(long, default_value_t = 0.0)]
+        t: f64,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        select: query_cmd::SelectArgs,
+    },
+    /// Build a query test scene from a real scene and its per-Gaussian labels: SYNTHETIC
+    /// 9-dim language (one code per category), a constructed language decoder, one text
+    /// embedding per category and stand-in negatives (no CLIP model is available here).
+    Labels(query_cmd::LabelsArgs),
     /// Write the cameras a scene would be rendered with (orbit or selection) as cameras.json.
     Cameras {
         scene: PathBuf,
@@ -167,6 +187,28 @@ fn main() -> Result<()> {
                 .first()
                 .map_or([0.0; 3], |c| c.position.to_array());
             let g = src.at(t, eye, canon.has_language())?;
+            std::fs::write(&output, dlgs::interop::ply::write_ply(&g)?)
+                .with_context(|| format!("writing {}", output.display()))?;
+            println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
+            Ok(())
+        }
+        Cmd::Query(a) => query_cmd::run_query(&a),
+        Cmd::Labels(a) => query_cmd::run_labels(&a),
+        Cmd::Export {
+            file,
+            t,
+            output,
+            select,
+        } => {
+            let mut src = scene_io::Source::open(&file)?;
+            // View-dependent decoders need a viewpoint: the default orbit's first camera (as
+            // `dlgs decode`).
+            let canon = src.canonical(t)?;
+            let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
+                .first()
+                .map_or([0.0; 3], |c| c.position.to_array());
+            let g = src.at(t, eye, canon.has_language())?;
+            let g = query_cmd::apply_selection(&select, &mut src, g)?;
             std::fs::write(&output, dlgs::interop::ply::write_ply(&g)?)
                 .with_context(|| format!("writing {}", output.display()))?;
             println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());

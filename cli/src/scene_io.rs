@@ -69,3 +69,26 @@ impl Source {
         }
     }
 }
+
+impl Source {
+    /// The file's language decoder (`.dlgs` with a `LAED` chunk), if any.
+    pub fn lang_decoder(&mut self) -> Result<Option<dlgs::model::lang_decoder::LangDecoder>> {
+        match self {
+            Source::Splat(_) => Ok(None),
+            Source::Dlgs(dec, name) => dec
+                .lang_decoder()
+                .with_context(|| format!("reading the language decoder of {name}")),
+        }
+    }
+
+    /// Language levels and dims per level, from the `.dlgs` header.
+    pub fn language_shape(&self) -> Option<(usize, usize)> {
+        match self {
+            Source::Splat(_) => None,
+            Source::Dlgs(dec, _) => {
+                let s = dec.scene();
+                (s.lang_levels > 0).then_some((s.lang_levels as usize, s.lang_dims as usize))
+            }
+        }
+    }
+}

@@ -13,11 +13,12 @@ use std::sync::Arc;
 
 use dlgs::container::gop::NO_REFERENCE;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
+use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
 use dlgs::payload::time_features::{self, TfeaBody};
 use dlgs::payload::{
-    decode_canonical, decode_residual, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
+    decode_canonical, decode_residual, lang_decoder, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
 };
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
@@ -166,6 +167,18 @@ impl<R: Read + Seek> Decoder<R> {
     /// The frame index shown at time `t` seconds (frame f covers [f/fps, (f+1)/fps)).
     pub fn frame_index_at(&self, t: f64) -> Result<u32> {
         Ok(self.scene().locate(t)?.frame)
+    }
+
+    /// The scene's language autoencoder decoder and canonical negatives (`LAED`, §6.8), if
+    /// the file carries one. Read on demand: only queries need it.
+    pub fn lang_decoder(&mut self) -> Result<Option<LangDecoder>> {
+        let Some(c) = Self::find(self.reader.scene_chunks(), ChunkType::LAED) else {
+            return Ok(None);
+        };
+        let p = self.reader.payload(&c)?;
+        let scene = self.reader.scene().clone();
+        let limits = *self.reader.limits();
+        lang_decoder::decode(&p, c.payload_offset(), &scene, &limits).map(Some)
     }
 
     fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {

@@ -13,6 +13,7 @@ use std::io::Write;
 
 use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
+use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
 use dlgs::model::DynamicGop;
@@ -20,7 +21,7 @@ use dlgs::payload::mlp_weights::{self, WeightType};
 use dlgs::payload::raw_canonical::{self, RawCodec};
 use dlgs::payload::sorted_grid::{self, QuantBits};
 use dlgs::payload::time_features::{self, TfeaBody, Tiling};
-use dlgs::payload::{decode_canonical, delta_residual, ntc_residual};
+use dlgs::payload::{decode_canonical, delta_residual, lang_decoder, ntc_residual};
 use dlgs::{Canonical, Error, ErrorKind, Result};
 pub use dlgs_video::HevcSettings;
 
@@ -141,6 +142,11 @@ pub struct EncoderConfig {
     pub mlp_weights: WeightType,
     /// Explicit residuals of sequential/parallel scenes.
     pub residual: ResidualConfig,
+    /// The scene's language autoencoder decoder (and canonical negatives), written as the
+    /// scene-level `LAED` chunk so players can answer text queries (§6.8).
+    pub lang_decoder: Option<LangDecoder>,
+    /// Storage type of the language decoder's values.
+    pub lang_decoder_weights: WeightType,
 }
 
 impl Default for EncoderConfig {
@@ -154,6 +160,9 @@ impl Default for EncoderConfig {
             per_gop_range: false,
             mlp_weights: WeightType::F32,
             residual: ResidualConfig::default(),
+            lang_decoder: None,
+            // f16 halves the chunk; the relevance it changes is measured in BENCHMARKS.md.
+            lang_decoder_weights: WeightType::F16,
         }
     }
 }
@@ -178,6 +187,29 @@ impl<W: Write> StreamEncoder<W> {
             let bytes = serde_json::to_vec(meta)
                 .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
             writer.scene_chunk(ChunkType::META, 0, &bytes)?;
+        }
+        if let Some(d) = &cfg.lang_decoder {
+            if writer.scene().lang_levels == 0 {
+                return Err(Error::new(
+                    ErrorKind::InvalidInput(
+                        "a language decoder was given but the scene has no language features"
+                            .into(),
+                    ),
+                    0,
+                ));
+            }
+            if d.input_dims() != writer.scene().lang_dims as usize {
+                return Err(Error::new(
+                    ErrorKind::InvalidInput(format!(
+                        "the language decoder takes {} dims, the scene has {} per level",
+                        d.input_dims(),
+                        writer.scene().lang_dims
+                    )),
+                    0,
+                ));
+            }
+            let bytes = lang_decoder::encode(d, cfg.lang_decoder_weights, 19)?;
+            writer.scene_chunk(ChunkType::LAED, 0, &bytes)?;
         }
         Ok(StreamEncoder {
             writer,

@@ -26,6 +26,8 @@ impl ChunkType {
     pub const RNTC: ChunkType = ChunkType(*b"RNTC");
     /// Explicit quantised per-attribute residual against the reference GOP, §6.7.
     pub const RDLT: ChunkType = ChunkType(*b"RDLT");
+    /// Language autoencoder decoder and canonical negatives, for queries, §6.8.
+    pub const LAED: ChunkType = ChunkType(*b"LAED");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes

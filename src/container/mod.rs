@@ -28,6 +28,7 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::CSOG,
     ChunkType::RNTC,
     ChunkType::RDLT,
+    ChunkType::LAED,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

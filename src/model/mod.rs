@@ -2,6 +2,7 @@
 
 pub mod dynamic;
 pub mod gaussians;
+pub mod lang_decoder;
 pub mod ntc;
 pub mod residual;
 
