@@ -58,4 +58,11 @@ echo "== PSNR at GOP boundaries (decoded vs model) and the jump across each boun
 $B boundaries "$OUT/residual_exact.dlgs" "$OUT/residual.dlgs" --orbit 4 --width 676 --height 507
 echo "== seek latency"
 $B seek "$OUT/residual.dlgs" --count 10
+echo "== open-vocabulary query on the real fruit-drops scene with its REAL per-Gaussian labels"
+echo "   (SYNTHETIC language: one code per category and a constructed decoder; no CLIP model here)"
+FRUIT="$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply"
+$B labels "$FRUIT" --annotations "$DATA/ply/supersplat_fruit_drops_minimal.annotations.json" -o "$OUT/labels" | tail -3
+$B encode "$OUT/labels/scene.ply" -o "$OUT/labels.dlgs" --lang-decoder "$OUT/labels/lang_decoder.safetensors" --negatives "$OUT/labels/negatives.npy"
+$B query "$OUT/labels.dlgs" --text-embedding "$OUT/labels/category_4.npy" --view 0 -o "$OUT/query/category_4" --timing
+$B export "$OUT/labels.dlgs" --select "$OUT/labels/category_4.npy" -o "$OUT/query/category_4.ply"
 echo "outputs in $OUT/"
