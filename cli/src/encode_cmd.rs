@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::container::header::{DeformModel, ResidualMode};
-use dlgs::model::lang_decoder::{LangDecoder, NamedEmbedding};
+use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs::payload::mlp_weights::WeightType;
 use dlgs::payload::raw_canonical::RawCodec;
@@ -227,12 +227,7 @@ impl CodecArgs {
                     d.embed_dims()
                 );
             }
-            d.negatives = (0..e.count())
-                .map(|i| NamedEmbedding {
-                    name: e.names[i].clone(),
-                    values: e.row(i).to_vec(),
-                })
-                .collect();
+            d.negatives = e.to_named();
         }
         Ok(Some(d))
     }

@@ -156,6 +156,29 @@ fn parse_rgb(s: &str) -> Result<[f32; 3]> {
     Ok([v[0], v[1], v[2]])
 }
 
+/// The Gaussians shown at `t` (optionally only a text query's selection) as an INRIA PLY.
+/// View-dependent decoders need a viewpoint: the default orbit's first camera.
+fn export_ply(
+    file: &std::path::Path,
+    t: f64,
+    output: &std::path::Path,
+    select: Option<&query_cmd::SelectArgs>,
+) -> Result<()> {
+    let mut src = scene_io::Source::open(file)?;
+    let canon = src.canonical(t)?;
+    let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
+        .first()
+        .map_or([0.0; 3], |c| c.position.to_array());
+    let mut g = src.at(t, eye, canon.has_language())?;
+    if let Some(sel) = select {
+        g = query_cmd::apply_selection(sel, &mut src, g)?;
+    }
+    std::fs::write(output, dlgs::interop::ply::write_ply(&g)?)
+        .with_context(|| format!("writing {}", output.display()))?;
+    println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
+    Ok(())
+}
+
 fn numbered(path: &std::path::Path, i: usize, n: usize) -> PathBuf {
     if n == 1 {
         return path.to_path_buf();
@@ -179,19 +202,7 @@ fn main() -> Result<()> {
         Cmd::Seek { file, count, seed } => seek_cmd::run_seek(&file, count, seed),
         Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
         Cmd::Synth(args) => encode_cmd::run_synth(&args),
-        Cmd::Decode { file, t, output } => {
-            let mut src = scene_io::Source::open(&file)?;
-            // View-dependent decoders need a viewpoint: the default orbit's first camera.
-            let canon = src.canonical(t)?;
-            let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
-                .first()
-                .map_or([0.0; 3], |c| c.position.to_array());
-            let g = src.at(t, eye, canon.has_language())?;
-            std::fs::write(&output, dlgs::interop::ply::write_ply(&g)?)
-                .with_context(|| format!("writing {}", output.display()))?;
-            println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
-            Ok(())
-        }
+        Cmd::Decode { file, t, output } => export_ply(&file, t, &output, None),
         Cmd::Query(a) => query_cmd::run_query(&a),
         Cmd::Labels(a) => query_cmd::run_labels(&a),
         Cmd::Export {
@@ -199,21 +210,7 @@ fn main() -> Result<()> {
             t,
             output,
             select,
-        } => {
-            let mut src = scene_io::Source::open(&file)?;
-            // View-dependent decoders need a viewpoint: the default orbit's first camera (as
-            // `dlgs decode`).
-            let canon = src.canonical(t)?;
-            let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
-                .first()
-                .map_or([0.0; 3], |c| c.position.to_array());
-            let g = src.at(t, eye, canon.has_language())?;
-            let g = query_cmd::apply_selection(&select, &mut src, g)?;
-            std::fs::write(&output, dlgs::interop::ply::write_ply(&g)?)
-                .with_context(|| format!("writing {}", output.display()))?;
-            println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
-            Ok(())
-        }
+        } => export_ply(&file, t, &output, Some(&select)),
         Cmd::Render {
             scene,
             cams,

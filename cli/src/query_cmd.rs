@@ -71,11 +71,9 @@ impl QuerySource {
         let positives = read_embeddings(&self.text_embedding)?;
         let negatives = match &self.negatives {
             Some(p) => read_embeddings(p)?,
-            None if !dec.negatives.is_empty() => Embeddings::from_rows(
-                dec.negatives.iter().map(|n| n.name.clone()).collect(),
-                dec.negatives.iter().map(|n| n.values.clone()).collect(),
-            )
-            .map_err(anyhow::Error::msg)?,
+            None if !dec.negatives.is_empty() => {
+                Embeddings::from_named(&dec.negatives).map_err(anyhow::Error::msg)?
+            }
             None => bail!(
                 "no negatives: the file's language decoder stores none, pass --negatives N.npy \
                  (the reference uses CLIP's \"object\", \"things\", \"stuff\", \"texture\")"

@@ -4,6 +4,8 @@
 
 use std::path::Path;
 
+use dlgs::model::lang_decoder::NamedEmbedding;
+
 use crate::error::{QueryError, Result};
 
 /// `count` embeddings of `dims` values each, unit length, with names.
@@ -22,6 +24,24 @@ impl Embeddings {
     pub fn row(&self, i: usize) -> &[f32] {
         &self.values[i * self.dims..(i + 1) * self.dims]
     }
+    /// From named embeddings (e.g. the negatives stored with a language decoder).
+    pub fn from_named(named: &[NamedEmbedding]) -> std::result::Result<Self, String> {
+        Self::from_rows(
+            named.iter().map(|n| n.name.clone()).collect(),
+            named.iter().map(|n| n.values.clone()).collect(),
+        )
+    }
+
+    /// As named embeddings, to store with a language decoder.
+    pub fn to_named(&self) -> Vec<NamedEmbedding> {
+        (0..self.count())
+            .map(|i| NamedEmbedding {
+                name: self.names[i].clone(),
+                values: self.row(i).to_vec(),
+            })
+            .collect()
+    }
+
     /// Build from rows, normalising each; rejects empty, ragged, zero, NaN or infinite rows.
     pub fn from_rows(names: Vec<String>, rows: Vec<Vec<f32>>) -> std::result::Result<Self, String> {
         let dims = rows.first().map_or(0, |r| r.len());

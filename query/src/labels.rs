@@ -168,19 +168,7 @@ impl LabelCodebook {
 
     /// The stand-in negatives as embeddings.
     pub fn negatives(&self) -> Embeddings {
-        Embeddings::from_rows(
-            self.decoder
-                .negatives
-                .iter()
-                .map(|n| n.name.clone())
-                .collect(),
-            self.decoder
-                .negatives
-                .iter()
-                .map(|n| n.values.clone())
-                .collect(),
-        )
-        .expect("unit vectors")
+        Embeddings::from_named(&self.decoder.negatives).expect("unit vectors")
     }
 
     /// The 9-dim feature of a Gaussian with `label`.

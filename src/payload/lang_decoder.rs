@@ -20,23 +20,6 @@ fn bad(reason: String, at: u64) -> Error {
     )
 }
 
-fn put_value(raw: &mut Vec<u8>, ty: WeightType, v: f32) -> Result<()> {
-    match ty {
-        WeightType::F32 => raw.put_f32(v),
-        WeightType::F16 => {
-            let h = half::f16::from_f32(v);
-            if !h.is_finite() {
-                return Err(Error::new(
-                    ErrorKind::InvalidInput(format!("language decoder value {v} overflows f16")),
-                    0,
-                ));
-            }
-            raw.put_u16(h.to_bits());
-        }
-    }
-    Ok(())
-}
-
 /// Serialise a decoder. Rejects invalid shapes, NaN/Inf and f16 overflow.
 pub fn encode(d: &LangDecoder, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>> {
     d.validate()?;
@@ -69,12 +52,12 @@ pub fn encode(d: &LangDecoder, ty: WeightType, zstd_level: i32) -> Result<Vec<u8
     let mut raw = Vec::new();
     for l in &d.layers {
         for &v in l.weight.iter().chain(&l.bias) {
-            put_value(&mut raw, ty, v)?;
+            ty.put(&mut raw, v, "language decoder value")?;
         }
     }
     for n in &d.negatives {
         for &v in &n.values {
-            put_value(&mut raw, ty, v)?;
+            ty.put(&mut raw, v, "negative embedding value")?;
         }
     }
     let z = zstd::bulk::compress(&raw, zstd_level)
@@ -143,10 +126,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         .map(|w| (w[0] * w[1] + w[1]) as u64)
         .sum::<u64>()
         + negatives as u64 * embed;
-    let size = match ty {
-        WeightType::F32 => 4,
-        WeightType::F16 => 2,
-    };
+    let size = ty.size() as u64;
     let raw_at = r.offset();
     let raw_len = r.u32("LAED value bytes")? as u64;
     if raw_len != values * size {
@@ -161,10 +141,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     limits.check_alloc("LAED values", raw_len, raw_at)?;
     let body_at = r.offset();
     let raw = zstd_exact(r.rest(), raw_len, body_at)?;
-    let mut it = raw.chunks_exact(size as usize).map(|b| match ty {
-        WeightType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-        WeightType::F16 => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
-    });
+    let mut it = ty.values(&raw);
     let mut take = |n: usize| -> Result<Vec<f32>> {
         let v: Vec<f32> = it.by_ref().take(n).collect();
         if v.iter().all(|x| x.is_finite()) {

@@ -20,11 +20,38 @@ pub enum WeightType {
 }
 
 impl WeightType {
-    fn size(self) -> usize {
+    /// Bytes per stored value.
+    pub fn size(self) -> usize {
         match self {
             WeightType::F32 => 4,
             WeightType::F16 => 2,
         }
+    }
+
+    /// Append `v` little-endian; `InvalidInput` naming `what` when it overflows f16.
+    pub fn put(self, out: &mut Vec<u8>, v: f32, what: &str) -> Result<()> {
+        match self {
+            WeightType::F32 => out.put_f32(v),
+            WeightType::F16 => {
+                let h = half::f16::from_f32(v);
+                if !h.is_finite() {
+                    return Err(Error::new(
+                        ErrorKind::InvalidInput(format!("{what} {v} overflows f16")),
+                        0,
+                    ));
+                }
+                out.put_u16(h.to_bits());
+            }
+        }
+        Ok(())
+    }
+
+    /// The values of `raw` (a multiple of `size()` bytes), as f32.
+    pub fn values(self, raw: &[u8]) -> impl Iterator<Item = f32> + '_ {
+        raw.chunks_exact(self.size()).map(move |b| match self {
+            WeightType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            WeightType::F16 => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
+        })
     }
 }
 
@@ -52,23 +79,9 @@ pub fn encode(m: &DeformMlps, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>
         }
         for l in &mlp.layers {
             check_finite(&format!("{} MLP weights", mlp.role.name()), &l.weights)?;
-            match ty {
-                WeightType::F32 => raw.put_f32s(&l.weights),
-                WeightType::F16 => {
-                    for &w in &l.weights {
-                        let h = half::f16::from_f32(w);
-                        if !h.is_finite() {
-                            return Err(Error::new(
-                                ErrorKind::InvalidInput(format!(
-                                    "{} MLP weight {w} overflows f16",
-                                    mlp.role.name()
-                                )),
-                                0,
-                            ));
-                        }
-                        raw.put_u16(h.to_bits());
-                    }
-                }
+            let what = format!("{} MLP weight", mlp.role.name());
+            for &w in &l.weights {
+                ty.put(&mut raw, w, &what)?;
             }
         }
     }
@@ -146,10 +159,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     limits.check_alloc("MLPW weights", raw_len, raw_at)?;
     let body_at = r.offset();
     let raw = zstd_exact(r.rest(), raw_len, body_at)?;
-    let mut values = raw.chunks_exact(ty.size()).map(|b| match ty {
-        WeightType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-        WeightType::F16 => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
-    });
+    let mut values = ty.values(&raw);
     let mut slots: [Option<Mlp>; 5] = Default::default();
     for (role, widths, at) in shapes {
         let mut layers = Vec::with_capacity(widths.len() - 1);

@@ -53,6 +53,13 @@ fn cameras(g: &Gaussians, count: usize) -> Vec<Camera> {
     )
 }
 
+fn with_language() -> RenderOptions {
+    RenderOptions {
+        features: true,
+        ..RenderOptions::default()
+    }
+}
+
 fn iou(a: &[bool], b: &[bool]) -> f64 {
     let inter = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
     let union = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
@@ -83,10 +90,7 @@ fn category_ious(
     .unwrap();
     let field = RelevanceField::new(dec, &positives, &book.negatives(), precision).unwrap();
     let gt_scene = one_hot(g, labels, 10).unwrap();
-    let opts = RenderOptions {
-        features: true,
-        ..RenderOptions::default()
-    };
+    let opts = with_language();
     let mut out = Vec::new();
     for (ci, cam) in cams.iter().enumerate() {
         let img = render(g, cam, &opts).unwrap();
@@ -274,10 +278,7 @@ fn masks_follow_the_motion_of_a_dynamic_model() {
         let gt_img = render(
             &one_hot(&g, &labels, 10).unwrap(),
             &cams[0],
-            &RenderOptions {
-                features: true,
-                ..RenderOptions::default()
-            },
+            &with_language(),
         )
         .unwrap();
         masks_by_time.push(label_map(gt_img.features.as_ref().unwrap(), 10, 0.5));
@@ -315,15 +316,7 @@ fn selection_in_3d_equals_the_labels() {
 fn table_relevance_is_close_to_exact_decoding() {
     let (lg, _, book) = labelled_scene();
     let cam = &cameras(&lg, 1)[0].resized(338, 253);
-    let img = render(
-        &lg,
-        cam,
-        &RenderOptions {
-            features: true,
-            ..RenderOptions::default()
-        },
-    )
-    .unwrap();
+    let img = render(&lg, cam, &with_language()).unwrap();
     let feats = img.features.unwrap();
     let level1: Vec<f32> = feats
         .chunks_exact(9)
