@@ -2,7 +2,9 @@
 
 mod cameras_arg;
 mod encode_cmd;
+mod export_cmd;
 mod info;
+mod play_cmd;
 mod query_cmd;
 mod scene_io;
 mod seek_cmd;
@@ -119,21 +121,18 @@ enum Cmd {
     /// language decoder, score it against a text embedding and write mask, heat map and
     /// overlay PNGs (the reference's filtering and thresholds by default).
     Query(query_cmd::QueryArgs),
-    /// Decode the Gaussians at time t to an INRIA PLY, optionally only those a text query
-    /// selects (3D selection: --select E.npy, --action keep|delete|highlight).
-    Export {
-        file: PathBuf,
-        #[arg(long, default_value_t = 0.0)]
-        t: f64,
-        #[arg(short, long)]
-        output: PathBuf,
-        #[command(flatten)]
-        select: query_cmd::SelectArgs,
-    },
+    /// Decoded frames for other players: INRIA PLY (`--extras`: with the language) or SPZ
+    /// (v3, or v2), one time (`--t`) or a sequence (`--frames a..b [--fps F]`); optionally
+    /// only the Gaussians a text query selects (--select E.npy, --action keep|delete|highlight).
+    Export(export_cmd::ExportArgs),
     /// Build a query test scene from a real scene and its per-Gaussian labels: SYNTHETIC
     /// 9-dim language (one code per category), a constructed language decoder, one text
     /// embedding per category and stand-in negatives (no CLIP model is available here).
     Labels(query_cmd::LabelsArgs),
+    /// Play a .dlgs stream in real time from a plain reader (file, `-` for stdin, optionally
+    /// throttled to a network rate): GOPs decode as their bytes arrive; reports dropped
+    /// frames, time to first frame and the sustained decode rate.
+    Play(play_cmd::PlayArgs),
     /// Write the cameras a scene would be rendered with (orbit or selection) as cameras.json.
     Cameras {
         scene: PathBuf,
@@ -154,29 +153,6 @@ fn parse_rgb(s: &str) -> Result<[f32; 3]> {
         bail!("background must be three finite numbers r,g,b");
     }
     Ok([v[0], v[1], v[2]])
-}
-
-/// The Gaussians shown at `t` (optionally only a text query's selection) as an INRIA PLY.
-/// View-dependent decoders need a viewpoint: the default orbit's first camera.
-fn export_ply(
-    file: &std::path::Path,
-    t: f64,
-    output: &std::path::Path,
-    select: Option<&query_cmd::SelectArgs>,
-) -> Result<()> {
-    let mut src = scene_io::Source::open(file)?;
-    let canon = src.canonical(t)?;
-    let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
-        .first()
-        .map_or([0.0; 3], |c| c.position.to_array());
-    let mut g = src.at(t, eye, canon.has_language())?;
-    if let Some(sel) = select {
-        g = query_cmd::apply_selection(sel, &mut src, g)?;
-    }
-    std::fs::write(output, dlgs::interop::ply::write_ply(&g)?)
-        .with_context(|| format!("writing {}", output.display()))?;
-    println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
-    Ok(())
 }
 
 fn numbered(path: &std::path::Path, i: usize, n: usize) -> PathBuf {
@@ -202,15 +178,11 @@ fn main() -> Result<()> {
         Cmd::Seek { file, count, seed } => seek_cmd::run_seek(&file, count, seed),
         Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
         Cmd::Synth(args) => encode_cmd::run_synth(&args),
-        Cmd::Decode { file, t, output } => export_ply(&file, t, &output, None),
+        Cmd::Decode { file, t, output } => export_cmd::run_decode(&file, t, &output),
         Cmd::Query(a) => query_cmd::run_query(&a),
         Cmd::Labels(a) => query_cmd::run_labels(&a),
-        Cmd::Export {
-            file,
-            t,
-            output,
-            select,
-        } => export_ply(&file, t, &output, Some(&select)),
+        Cmd::Play(a) => play_cmd::run_play(&a),
+        Cmd::Export(a) => export_cmd::run_export(&a),
         Cmd::Render {
             scene,
             cams,

@@ -71,6 +71,14 @@ impl Source {
 }
 
 impl Source {
+    /// Frame rate and frame count of a `.dlgs` stream (`None` for a still scene file).
+    pub fn timing(&self) -> Option<(f64, u32)> {
+        match self {
+            Source::Splat(_) => None,
+            Source::Dlgs(dec, _) => Some((dec.scene().fps(), dec.scene().frame_count)),
+        }
+    }
+
     /// The file's language decoder (`.dlgs` with a `LAED` chunk), if any.
     pub fn lang_decoder(&mut self) -> Result<Option<dlgs::model::lang_decoder::LangDecoder>> {
         match self {

@@ -1,10 +1,12 @@
 //! `dlgs-decoder`: random-access decoding of `.dlgs` streams, including the dynamic
 //! Gaussians at any time t (format-spec §6.4).
 
+mod build;
 pub mod deform;
 pub mod interp;
 pub mod panel;
 pub mod planar;
+pub mod stream;
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek};
@@ -16,10 +18,7 @@ use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
-use dlgs::payload::time_features::{self, TfeaBody};
-use dlgs::payload::{
-    decode_canonical, decode_residual, lang_decoder, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
-};
+use dlgs::payload::lang_decoder;
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
@@ -38,10 +37,10 @@ pub struct DecodedGop {
 
 /// A decoded canonical state and where it came from.
 #[derive(Clone)]
-struct State {
-    canonical: Arc<Canonical>,
-    source: ChunkType,
-    ntc: Option<Arc<NtcField>>,
+pub(crate) struct State {
+    pub(crate) canonical: Arc<Canonical>,
+    pub(crate) source: ChunkType,
+    pub(crate) ntc: Option<Arc<NtcField>>,
 }
 
 /// Decoded canonical states of recent GOPs (GOP 0 is kept while the cache holds anything: it
@@ -87,6 +86,26 @@ impl StateCache {
 }
 
 impl DecodedGop {
+    /// The Gaussians of this GOP at `time` (located in this GOP), written into the buffers
+    /// of `reuse`.
+    pub fn frame(
+        gop: &Arc<DecodedGop>,
+        time: TimePoint,
+        opts: &FrameOptions,
+        mut reuse: Gaussians,
+    ) -> Frame {
+        let canon = &gop.canonical.dynamics;
+        match &gop.deformer {
+            Some(d) => d.frame_into(canon, time.key, time.delta, opts, &mut reuse),
+            None => reuse.clone_from(canon),
+        }
+        Frame {
+            time,
+            gop: gop.clone(),
+            dynamics: reuse,
+        }
+    }
+
     /// The GOP's time features and decoders, if the scene has dynamic Gaussians (rebuilt from
     /// the deformer's layout; for re-encoding and inspection, not per frame).
     pub fn dynamic(&self) -> Option<DynamicGop> {
@@ -132,16 +151,6 @@ impl Decoder<BufReader<File>> {
         })?;
         Self::new(BufReader::new(f), Limits::default())
     }
-}
-
-fn video_error(e: dlgs_video::VideoError, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::TFEA,
-            reason: e.to_string(),
-        },
-        at,
-    )
 }
 
 impl<R: Read + Seek> Decoder<R> {
@@ -197,45 +206,16 @@ impl<R: Read + Seek> Decoder<R> {
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
         let state = self.state(g)?;
-        let canonical = state.canonical.clone();
-        let mut dynamic = None;
-        if scene.n_dynamic > 0 {
-            let tfea = Self::find(&chunks, ChunkType::TFEA)
-                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::TFEA), gop_at))?;
-            let mlpw = Self::find(&chunks, ChunkType::MLPW)
-                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::MLPW), gop_at))?;
-            let p = self.reader.payload(&tfea)?;
-            let at = tfea.payload_offset();
-            let features = match time_features::decode(&p, at, &scene, &limits)? {
-                TfeaBody::Exact(f) => f,
-                TfeaBody::Hevc {
-                    tiling,
-                    ranges,
-                    packets,
-                } => {
-                    let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
-                    let video = dlgs_video::decode_gray12(
-                        &refs,
-                        tiling.width() as u32,
-                        tiling.height() as u32,
-                        tiling.keys,
-                    )
-                    .map_err(|e| video_error(e, at))?;
-                    time_features::untile(&video.frames, &tiling, &ranges)
-                }
-            };
-            let p = self.reader.payload(&mlpw)?;
-            let mlps = mlp_weights::decode(&p, mlpw.payload_offset(), &scene, &limits)?;
-            dynamic = Some(DynamicGop { features, mlps });
-        }
-        let deformer = dynamic.map(|d| Deformer::new(&canonical.dynamics, d, scene.deform_model));
-        let gop = Arc::new(DecodedGop {
-            index: g,
-            canonical,
-            deformer,
-            source: state.source,
-            ntc: state.ntc,
-        });
+        let reader = &mut self.reader;
+        let gop = Arc::new(build::gop(
+            &scene,
+            &limits,
+            g,
+            &chunks,
+            gop_at,
+            state,
+            |c| reader.payload(c),
+        )?);
         self.cached = Some(gop.clone());
         Ok(gop)
     }
@@ -288,42 +268,9 @@ impl<R: Read + Seek> Decoder<R> {
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        let find = |set: &[ChunkType]| set.iter().find_map(|&ty| Self::find(&chunks, ty));
-        let (canon, residual) = (find(&CANONICAL_CHUNKS), find(&RESIDUAL_CHUNKS));
-        let Some(base) = base else {
-            if let Some(c) = residual {
-                return Err(Error::new(
-                    ErrorKind::Order("a residual chunk in a GOP without a reference GOP"),
-                    c.offset,
-                ));
-            }
-            let c = canon
-                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
-            let p = self.reader.payload(&c)?;
-            let canonical = decode_canonical(c.ty, &p, c.payload_offset(), &scene, &limits)
-                .expect("a canonical chunk type")?;
-            return Ok(State {
-                canonical: Arc::new(canonical),
-                source: c.ty,
-                ntc: None,
-            });
-        };
-        if let Some(c) = canon {
-            return Err(Error::new(
-                ErrorKind::Order("a canonical chunk in a GOP that has a reference GOP"),
-                c.offset,
-            ));
-        }
-        let c =
-            residual.ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::RDLT), gop_at))?;
-        let p = self.reader.payload(&c)?;
-        let at = c.payload_offset();
-        let (canonical, ntc) = decode_residual(c.ty, &p, at, &scene, &limits, &base.canonical)
-            .expect("a residual chunk type")?;
-        Ok(State {
-            canonical: Arc::new(canonical),
-            source: c.ty,
-            ntc: ntc.map(Arc::new),
+        let reader = &mut self.reader;
+        build::state(&scene, &limits, &chunks, gop_at, base, |c| {
+            reader.payload(c)
         })
     }
 
@@ -350,19 +297,10 @@ impl<R: Read + Seek> Decoder<R> {
         &mut self,
         t: f64,
         opts: &FrameOptions,
-        mut reuse: Gaussians,
+        reuse: Gaussians,
     ) -> Result<Frame> {
         let time = self.scene().locate(t)?;
         let gop = self.gop(time.gop)?;
-        let canon = &gop.canonical.dynamics;
-        match &gop.deformer {
-            Some(d) => d.frame_into(canon, time.key, time.delta, opts, &mut reuse),
-            None => reuse.clone_from(canon),
-        }
-        Ok(Frame {
-            time,
-            gop,
-            dynamics: reuse,
-        })
+        Ok(DecodedGop::frame(&gop, time, opts, reuse))
     }
 }

@@ -3,6 +3,7 @@
 pub mod ply;
 pub mod splat;
 pub mod spz;
+pub mod spz_write;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;

@@ -121,34 +121,14 @@ pub fn decode_all_random(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec
         .collect()
 }
 
-/// Decode every GOP's canonical state through the in-order stream reader (residual GOPs are
-/// applied to their reference GOP's state).
+/// Decode every GOP's canonical state through the in-order stream decoder (residual GOPs are
+/// applied to their reference GOP's state; the index and tail are checked at the end).
 pub fn decode_all_stream(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec<dlgs::Canonical>> {
-    use dlgs::container::{StreamEvent, StreamReader};
-    let mut r = StreamReader::with_limits(bytes, limits)?;
-    let scene = r.scene().clone();
-    let mut out: Vec<dlgs::Canonical> = Vec::new();
-    let mut ended = false;
-    let mut reference = dlgs::container::gop::NO_REFERENCE;
-    while let Some(ev) = r.next_event()? {
-        match ev {
-            StreamEvent::GopStart(_, h) => reference = h.reference_gop,
-            StreamEvent::GopChunk(c, p) => {
-                let at = c.payload_offset();
-                if let Some(g) = dlgs::payload::decode_canonical(c.ty, &p, at, &scene, &limits) {
-                    out.push(g?);
-                } else if let Some(base) = out.get(reference as usize) {
-                    if let Some(g) =
-                        dlgs::payload::decode_residual(c.ty, &p, at, &scene, &limits, base)
-                    {
-                        out.push(g?.0);
-                    }
-                }
-            }
-            StreamEvent::End(_) => ended = true,
-            _ => {}
-        }
+    let mut dec = dlgs_decoder::stream::StreamDecoder::with_limits(bytes, limits)?;
+    let mut out = Vec::new();
+    while let Some(g) = dec.next_gop()? {
+        out.push((*g.canonical).clone());
     }
-    assert!(ended, "stream finished without End");
+    assert!(dec.finished(), "stream finished without End");
     Ok(out)
 }

@@ -1,0 +1,272 @@
+//! `dlgs play`: real-time playback over a plain `Read` (the file, stdin, or the file throttled
+//! to a network rate). A reader thread decodes GOPs in file order as their bytes arrive and
+//! hands them over one GOP ahead; the player decodes each frame at its presentation time and
+//! drops the frames it is too late for.
+
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::PathBuf;
+use std::sync::mpsc::{sync_channel, Receiver};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use dlgs::model::Gaussians;
+use dlgs_decoder::stream::StreamDecoder;
+use dlgs_decoder::{DecodedGop, FrameOptions};
+
+#[derive(clap::Args)]
+pub struct PlayArgs {
+    /// The .dlgs file, or `-` for stdin.
+    pub file: PathBuf,
+    /// Presentation rate (default: the file's frame rate).
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Deliver the file's bytes at this rate (megabits per second), as a network would.
+    #[arg(long)]
+    pub bandwidth_mbps: Option<f64>,
+    /// Decode every frame as fast as possible (no clock, no drops): the sustained decode rate.
+    #[arg(long)]
+    pub max_speed: bool,
+    /// Also evaluate the language decoders of dynamic Gaussians.
+    #[arg(long)]
+    pub language: bool,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A `Read` that delivers at most `bytes_per_s`, sleeping as a slow link would.
+struct Throttled<R> {
+    inner: R,
+    bytes_per_s: f64,
+    start: Instant,
+    delivered: u64,
+}
+
+impl<R: Read> Read for Throttled<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let cap = buf.len().min(16 * 1024);
+        let n = self.inner.read(&mut buf[..cap])?;
+        self.delivered += n as u64;
+        let due = Duration::from_secs_f64(self.delivered as f64 / self.bytes_per_s);
+        if let Some(wait) = due.checked_sub(self.start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        Ok(n)
+    }
+}
+
+/// What the reader thread sends: a decoded GOP, the time from asking for it to having it
+/// (bytes arriving + decoding) and the decoding time alone, in ms.
+type GopMsg = dlgs::Result<(Arc<DecodedGop>, f64, f64)>;
+
+fn open_source(args: &PlayArgs) -> Result<Box<dyn Read + Send>> {
+    let raw: Box<dyn Read + Send> = if args.file.as_os_str() == "-" {
+        Box::new(std::io::stdin())
+    } else {
+        Box::new(
+            File::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?,
+        )
+    };
+    let buffered = BufReader::with_capacity(1 << 16, raw);
+    Ok(match args.bandwidth_mbps {
+        Some(m) if m > 0.0 && m.is_finite() => Box::new(Throttled {
+            inner: buffered,
+            bytes_per_s: m * 1e6 / 8.0,
+            start: Instant::now(),
+            delivered: 0,
+        }),
+        Some(m) => bail!("--bandwidth-mbps must be a positive number, got {m}"),
+        None => Box::new(buffered),
+    })
+}
+
+#[derive(Default, serde::Serialize)]
+struct PlayReport {
+    frames: u32,
+    shown: u32,
+    dropped: u32,
+    fps: f64,
+    time_to_first_frame_ms: f64,
+    wall_s: f64,
+    frame_decode_ms_mean: f64,
+    frame_decode_ms_p95: f64,
+    frame_decode_ms_max: f64,
+    gop_decode_ms: Vec<f64>,
+    /// Bytes arriving + decoding, per GOP.
+    gop_ready_ms: Vec<f64>,
+    /// Time the player waited for a GOP that had not arrived yet.
+    stall_ms: f64,
+    sustained_decode_fps: f64,
+}
+
+pub fn run_play(args: &PlayArgs) -> Result<()> {
+    let opened = Instant::now();
+    let src = open_source(args)?;
+    let (tx, rx) = sync_channel::<GopMsg>(1);
+    let (scene_tx, scene_rx) = sync_channel(1);
+    let reader = std::thread::spawn(move || {
+        let mut dec = match StreamDecoder::new(src) {
+            Ok(d) => d,
+            Err(e) => {
+                let _ = scene_tx.send(Err(e));
+                return;
+            }
+        };
+        let _ = scene_tx.send(Ok(dec.scene().clone()));
+        loop {
+            let t0 = Instant::now();
+            match dec.next_gop() {
+                Ok(Some(g)) => {
+                    let total = t0.elapsed().as_secs_f64() * 1e3;
+                    let decode = dec.last_decode_time().as_secs_f64() * 1e3;
+                    if tx.send(Ok((g, total, decode))).is_err() {
+                        return;
+                    }
+                }
+                Ok(None) => return,
+                Err(e) => {
+                    let _ = tx.send(Err(e));
+                    return;
+                }
+            }
+        }
+    });
+    let scene = scene_rx
+        .recv()
+        .context("the reader thread ended before the header")?
+        .context("reading the stream header")?;
+    let fps = args.fps.unwrap_or(scene.fps());
+    if !(fps > 0.0 && fps.is_finite()) {
+        bail!("--fps must be a positive number, got {fps}");
+    }
+    let report = play_loop(args, &scene, fps, &rx, opened)?;
+    drop(rx);
+    let _ = reader.join();
+    print_report(&report, args.json)
+}
+
+fn play_loop(
+    args: &PlayArgs,
+    scene: &dlgs::container::SceneHeader,
+    fps: f64,
+    rx: &Receiver<GopMsg>,
+    opened: Instant,
+) -> Result<PlayReport> {
+    let frames = scene.frame_count;
+    let period = 1.0 / fps;
+    let opts = FrameOptions {
+        camera_center: [0.0; 3],
+        language: args.language,
+    };
+    let mut r = PlayReport {
+        frames,
+        fps,
+        ..Default::default()
+    };
+    let mut gop: Option<Arc<DecodedGop>> = None;
+    let mut buffer = Gaussians::default();
+    let mut decode_ms = Vec::new();
+    let mut clock_start: Option<Instant> = None;
+    let bar = indicatif::ProgressBar::new(frames as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
+            .expect("valid template"),
+    );
+    for f in 0..frames {
+        if let (Some(start), false) = (clock_start, args.max_speed) {
+            // More than one period late: this frame's slot has passed, skip it.
+            if start.elapsed().as_secs_f64() > (f as f64 + 1.0) * period {
+                r.dropped += 1;
+                bar.inc(1);
+                continue;
+            }
+        }
+        // Frame f is shown at its own time (frame index / file rate).
+        let time = scene.locate(f as f64 / scene.fps())?;
+        if gop.as_ref().map(|g| g.index) != Some(time.gop) {
+            let wait = Instant::now();
+            loop {
+                let (g, arrival_ms, ms) = rx
+                    .recv()
+                    .context("the stream ended before the GOP of frame")?
+                    .with_context(|| format!("decoding the GOP of frame {f}"))?;
+                r.gop_decode_ms.push(ms);
+                r.gop_ready_ms.push(arrival_ms);
+                let done = g.index >= time.gop;
+                gop = Some(g);
+                if done {
+                    break;
+                }
+            }
+            if clock_start.is_some() {
+                r.stall_ms += wait.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        let g = gop.as_ref().expect("set above");
+        let t0 = Instant::now();
+        let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer));
+        decode_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        buffer = frame.dynamics;
+        r.shown += 1;
+        bar.inc(1);
+        let start = *clock_start.get_or_insert_with(|| {
+            r.time_to_first_frame_ms = opened.elapsed().as_secs_f64() * 1e3;
+            Instant::now()
+        });
+        if !args.max_speed {
+            let due = Duration::from_secs_f64((f as f64 + 1.0) * period);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+    }
+    bar.finish_and_clear();
+    r.wall_s = clock_start.map_or(0.0, |s| s.elapsed().as_secs_f64());
+    if !decode_ms.is_empty() {
+        let n = decode_ms.len() as f64;
+        r.frame_decode_ms_mean = decode_ms.iter().sum::<f64>() / n;
+        let mut sorted = decode_ms.clone();
+        sorted.sort_by(f64::total_cmp);
+        r.frame_decode_ms_p95 = sorted[((n * 0.95) as usize).min(sorted.len() - 1)];
+        r.frame_decode_ms_max = *sorted.last().expect("non-empty");
+        // GOP decoding runs on the reader thread, in parallel with frame decoding; the
+        // sustained rate counts both, as if they shared one thread.
+        let total_ms = decode_ms.iter().sum::<f64>() + r.gop_decode_ms.iter().sum::<f64>();
+        r.sustained_decode_fps = n / (total_ms / 1e3);
+    }
+    Ok(r)
+}
+
+fn print_report(r: &PlayReport, json: bool) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(r)?);
+        return Ok(());
+    }
+    println!(
+        "{} frames at {:.2} fps: {} shown, {} dropped, wall {:.2} s",
+        r.frames, r.fps, r.shown, r.dropped, r.wall_s
+    );
+    println!("time to first frame: {:.1} ms", r.time_to_first_frame_ms);
+    println!(
+        "frame decode: mean {:.2} ms, p95 {:.2} ms, max {:.2} ms",
+        r.frame_decode_ms_mean, r.frame_decode_ms_p95, r.frame_decode_ms_max
+    );
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|m| format!("{m:.0}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
+        list(&r.gop_decode_ms),
+        list(&r.gop_ready_ms)
+    );
+    println!("player stalled {:.1} ms waiting for GOPs", r.stall_ms);
+    println!(
+        "sustained decode rate (frames + GOPs on one thread): {:.1} frames/s",
+        r.sustained_decode_fps
+    );
+    Ok(())
+}
