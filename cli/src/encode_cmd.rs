@@ -270,6 +270,19 @@ pub fn run_encode(
     codec: &CodecArgs,
     residual_mode: Option<&str>,
 ) -> Result<()> {
+    let frames = encode_file(input, output, codec, residual_mode, true)?;
+    report(input, output, frames)
+}
+
+/// Encode `input` (a splat scene, or a `.dlgs` to re-encode) into `output`; returns the
+/// number of frames. `verbose`: progress bar and a line for still scenes.
+pub fn encode_file(
+    input: &Path,
+    output: &Path,
+    codec: &CodecArgs,
+    residual_mode: Option<&str>,
+    verbose: bool,
+) -> Result<u32> {
     let settings = serde_json::json!(format!("{codec:?}"));
     let f =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
@@ -278,8 +291,10 @@ pub fn run_encode(
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
         dlgs_encoder::encode_still(&g, codec.config(meta(input, settings))?, out)?;
-        println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
-        return report(input, output, 1);
+        if verbose {
+            println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
+        }
+        return Ok(1);
     }
     // Re-encode every GOP of an existing stream with new settings.
     let mut dec =
@@ -302,7 +317,11 @@ pub fn run_encode(
             .with_context(|| format!("reading the language decoder of {}", input.display()))?;
     }
     let mut enc = StreamEncoder::new(out, scene.clone(), cfg)?;
-    let pb = bar(scene.gop_count as u64, "encoding");
+    let pb = if verbose {
+        bar(scene.gop_count as u64, "encoding")
+    } else {
+        ProgressBar::hidden()
+    };
     for g in 0..scene.gop_count {
         let gop = dec.gop(g).with_context(|| format!("decoding GOP {g}"))?;
         // A binary voxel residual is kept as it is when the reference structure is unchanged
@@ -318,7 +337,7 @@ pub fn run_encode(
     pb.finish_and_clear();
     let mut w = enc.finish()?;
     std::io::Write::flush(&mut w)?;
-    report(input, output, scene.frame_count)
+    Ok(scene.frame_count)
 }
 
 /// `dlgs synth`: a dynamic test model from a real scene.

@@ -6,6 +6,8 @@ mod export_cmd;
 mod info;
 mod play_cmd;
 mod query_cmd;
+mod rd_cmd;
+mod rd_plot;
 mod scene_io;
 mod seek_cmd;
 
@@ -133,6 +135,10 @@ enum Cmd {
     /// throttled to a network rate): GOPs decode as their bytes arrive; reports dropped
     /// frames, time to first frame and the sustained decode rate.
     Play(play_cmd::PlayArgs),
+    /// Rate-distortion sweep: encode a model at every crf x quality x bits setting, decode
+    /// every frame, render sampled times from the cameras; CSV + PNG plots (bytes/frame vs
+    /// PSNR, decode ms/frame vs PSNR).
+    Rd(rd_cmd::RdArgs),
     /// Write the cameras a scene would be rendered with (orbit or selection) as cameras.json.
     Cameras {
         scene: PathBuf,
@@ -182,6 +188,7 @@ fn main() -> Result<()> {
         Cmd::Query(a) => query_cmd::run_query(&a),
         Cmd::Labels(a) => query_cmd::run_labels(&a),
         Cmd::Play(a) => play_cmd::run_play(&a),
+        Cmd::Rd(a) => rd_cmd::run_rd(&a),
         Cmd::Export(a) => export_cmd::run_export(&a),
         Cmd::Render {
             scene,

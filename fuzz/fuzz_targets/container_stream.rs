@@ -1,25 +1,24 @@
-//! In-order stream reader, decoding every canonical payload (CRAW, CSOG) it yields and applying
-//! every residual payload (RNTC, RDLT) to the last decoded state, with tiny limits.
+//! In-order stream decoder (`StreamDecoder`) with tiny limits: every GOP it yields is built
+//! (canonical or residual against its reference, time features incl. HEVC, decoders) and one
+//! frame of it is deformed; a language decoder chunk is parsed and run once.
 #![no_main]
-use dlgs::container::{StreamEvent, StreamReader};
+use dlgs_decoder::stream::StreamDecoder;
+use dlgs_decoder::{DecodedGop, FrameOptions};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let limits = dlgs::Limits::tiny();
-    let Ok(mut r) = StreamReader::with_limits(data, limits) else { return };
-    let scene = r.scene().clone();
-    let mut state = None;
-    while let Ok(Some(ev)) = r.next_event() {
-        if let StreamEvent::GopChunk(c, p) = ev {
-            let at = c.payload_offset();
-            if let Some(Ok(g)) = dlgs::payload::decode_canonical(c.ty, &p, at, &scene, &limits) {
-                state = Some(g);
-            } else if let Some(base) = &state {
-                if let Some(Ok((g, _))) =
-                    dlgs::payload::decode_residual(c.ty, &p, at, &scene, &limits, base)
-                {
-                    state = Some(g);
-                }
+    let Ok(mut d) = StreamDecoder::with_limits(data, dlgs::Limits::tiny()) else { return };
+    if let Ok(Some(ld)) = d.lang_decoder() {
+        let mut out = vec![0.0; ld.embed_dims()];
+        ld.decode_one(&vec![0.5; ld.input_dims()], &mut out);
+    }
+    let scene = d.scene().clone();
+    let opts = FrameOptions { camera_center: [0.0; 3], language: true };
+    while let Ok(Some(g)) = d.next_gop() {
+        let first = g.index.saturating_mul(scene.gop_length);
+        if let Ok(t) = scene.locate((first as f64 + 0.5) / scene.fps()) {
+            if t.gop == g.index {
+                let _ = DecodedGop::frame(&g, t, &opts, Default::default());
             }
         }
     }

@@ -1,4 +1,4 @@
-//! The TFEA and MLPW payload parsers directly, against a fixed dynamic scene header.
+//! The TFEA, MLPW and LAED payload parsers directly, against a fixed dynamic scene header.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
@@ -13,7 +13,12 @@ fuzz_target!(|data: &[u8]| {
     s.lang_dims = 3;
     let limits = dlgs::Limits::tiny();
     let (sel, body) = data.split_first().unwrap_or((&0, &[]));
-    if sel & 1 == 0 {
+    if sel % 3 == 2 {
+        if let Ok(ld) = dlgs::payload::lang_decoder::decode(body, 0, &s, &limits) {
+            let mut out = vec![0.0; ld.embed_dims()];
+            ld.decode_one(&vec![0.25; ld.input_dims()], &mut out);
+        }
+    } else if sel & 1 == 0 {
         if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, packets }) =
             dlgs::payload::time_features::decode(body, 0, &s, &limits)
         {

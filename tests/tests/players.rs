@@ -35,7 +35,10 @@ fn sigmoid(x: f32) -> f32 {
 
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 /// Rotation agreement: worst `1 - |q_a . q_b|` over normalised quaternions.
@@ -79,7 +82,11 @@ fn splat_transform_reads_our_ply_and_spz_exports() {
         language: false,
     };
     // A frame of the residual GOP, between two frames.
-    let g = dec.frame_at(1.0123, &opts).unwrap().merged().without_language();
+    let g = dec
+        .frame_at(1.0123, &opts)
+        .unwrap()
+        .merged()
+        .without_language();
 
     let ply = tmp.path().join("frame.ply");
     std::fs::write(&ply, dlgs::interop::ply::write_ply(&g).unwrap()).unwrap();
@@ -134,9 +141,19 @@ fn splat_transform_reads_our_ply_and_spz_exports() {
         assert!(pos <= 0.5 / 4096.0 + 1e-6, "{version:?} positions {pos}");
         assert!(scl <= 1.0 / 32.0 + 1e-5, "{version:?} log-scales {scl}");
         assert!(alpha <= 0.5 / 255.0 + 1e-4, "{version:?} alpha {alpha}");
-        assert!(dc_err <= 0.5 / (255.0 * 0.15) + 1e-4, "{version:?} DC {dc_err}");
-        assert!(rest_err <= 0.5 / 128.0 + 1e-4, "{version:?} SH rest {rest_err}");
-        let rot_tol = if version == SpzVersion::V3 { 2e-3 } else { 2e-2 };
+        assert!(
+            dc_err <= 0.5 / (255.0 * 0.15) + 1e-4,
+            "{version:?} DC {dc_err}"
+        );
+        assert!(
+            rest_err <= 0.5 / 128.0 + 1e-4,
+            "{version:?} SH rest {rest_err}"
+        );
+        let rot_tol = if version == SpzVersion::V3 {
+            2e-3
+        } else {
+            2e-2
+        };
         assert!(rot <= rot_tol, "{version:?} rotations {rot}");
     }
 }
