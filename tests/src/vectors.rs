@@ -63,7 +63,11 @@ pub fn all() -> Vec<Vector> {
         },
         Vector {
             name: "tiny-language",
-            bytes: still(&Canonical::from_static(lang), lang_scene, RawCodec::None),
+            bytes: still(
+                &Canonical::from_static(lang.clone()),
+                lang_scene,
+                RawCodec::None,
+            ),
             error: None,
             about: "language opacity and 3x3 language features",
         },
@@ -89,6 +93,12 @@ pub fn all() -> Vec<Vector> {
         bytes: dynamic_vector(&lod3),
         error: None,
         about: "2 GOPs of 60 frames, 128 of 512 lod3 Gaussians animated by the synthetic generator (no trained DLGStream model exists here), language, exact TFEA, f32 MLPW; decoded frames in lod3-dynamic.frames.f32",
+    });
+    v.push(Vector {
+        name: LAED_VECTOR,
+        bytes: laed_vector(&lang),
+        error: None,
+        about: "tiny-language plus a scene-level LAED chunk: a 3 -> 8 -> 16 ReLU decoder with biases in f16 and two named negatives; decoded embeddings in tiny-laed.embeddings.f32",
     });
     v.push(Vector {
         name: "lod3-residuals",
@@ -194,6 +204,94 @@ fn still_unchecked(c: &Canonical, scene: SceneHeader) -> Vec<u8> {
     )
     .unwrap();
     w.finish().unwrap()
+}
+
+/// The language-decoder vector's name; its decoded embeddings are in
+/// `valid/<name>.embeddings.f32`.
+pub const LAED_VECTOR: &str = "tiny-laed";
+
+/// A small decoder with every feature of §6.8: two layers, biases, negatives; f16 values.
+fn small_lang_decoder() -> dlgs::model::lang_decoder::LangDecoder {
+    use dlgs::model::lang_decoder::{DenseLayer, LangDecoder, NamedEmbedding};
+    let wave =
+        |n: usize, f: f32| -> Vec<f32> { (0..n).map(|i| ((i as f32 + 1.0) * f).sin()).collect() };
+    let unit = |v: Vec<f32>| {
+        let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+        v.into_iter().map(|x| x / n).collect::<Vec<f32>>()
+    };
+    LangDecoder {
+        layers: vec![
+            DenseLayer {
+                inputs: 3,
+                outputs: 8,
+                weight: wave(24, 0.7),
+                bias: wave(8, 1.3).iter().map(|b| b * 0.1).collect(),
+            },
+            DenseLayer {
+                inputs: 8,
+                outputs: 16,
+                weight: wave(128, 0.37),
+                bias: wave(16, 2.1).iter().map(|b| b * 0.1).collect(),
+            },
+        ],
+        negatives: vec![
+            NamedEmbedding {
+                name: "object".into(),
+                values: unit(wave(16, 0.9)),
+            },
+            NamedEmbedding {
+                name: "things".into(),
+                values: unit(wave(16, 1.7)),
+            },
+        ],
+    }
+}
+
+fn laed_vector(lang: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs::model::lang_decoder::LangDecoder;
+    use dlgs::payload::mlp_weights::WeightType;
+    let mut scene = SceneHeader::still(lang.len() as u32, lang.sh_degree);
+    scene.lang_levels = 3;
+    scene.lang_dims = 3;
+    let d: LangDecoder = small_lang_decoder();
+    let mut w = Writer::new(Vec::new(), scene).unwrap();
+    w.scene_chunk(
+        ChunkType::LAED,
+        0,
+        &dlgs::payload::lang_decoder::encode(&d, WeightType::F16, 19).unwrap(),
+    )
+    .unwrap();
+    w.begin_gop().unwrap();
+    w.gop_chunk(
+        ChunkType::CRAW,
+        FLAG_MUST_UNDERSTAND,
+        &raw_canonical::encode(&Canonical::from_static(lang.clone()), RawCodec::None, 19).unwrap(),
+    )
+    .unwrap();
+    w.finish().unwrap()
+}
+
+/// What a decoder must produce from the LAED vector, f32: for every Gaussian of GOP 0 in file
+/// order and every language level, the decoded (L2-normalised) embedding; then every
+/// negative's values.
+pub fn laed_embeddings(bytes: &[u8]) -> Vec<f32> {
+    let mut dec =
+        dlgs_decoder::Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    let ld = dec.lang_decoder().unwrap().expect("an LAED chunk");
+    let g = dec.gop_canonical(0).unwrap();
+    let dims = ld.input_dims();
+    let mut out = Vec::new();
+    let mut e = vec![0.0; ld.embed_dims()];
+    for i in 0..g.statics.len() {
+        for level in g.statics.lang_of(i).chunks_exact(dims) {
+            ld.decode_one(level, &mut e);
+            out.extend(&e);
+        }
+    }
+    for n in &ld.negatives {
+        out.extend(&n.values);
+    }
+    out
 }
 
 /// Lines of `expected.txt` for a valid vector: `name gop sha256`.

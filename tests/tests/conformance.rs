@@ -99,3 +99,32 @@ fn dynamic_vector_decodes_to_the_listed_frames() {
     let per_time = want.len() / vectors::FRAME_TIMES.len();
     assert!(want[..per_time] != want[per_time..2 * per_time]);
 }
+
+#[test]
+fn language_decoder_vector_decodes_to_the_listed_embeddings() {
+    let name = vectors::LAED_VECTOR;
+    let bytes = std::fs::read(root().join("valid").join(format!("{name}.dlgs"))).unwrap();
+    let want: Vec<f32> = std::fs::read(root().join("valid").join(format!("{name}.embeddings.f32")))
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    let got = vectors::laed_embeddings(&bytes);
+    // 3 Gaussians x 3 levels x 16 dims, then 2 negatives x 16.
+    assert_eq!(got.len(), 3 * 3 * 16 + 2 * 16);
+    assert_eq!(got.len(), want.len());
+    let worst = got
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(worst <= 1e-6, "{name}: max |decoded - listed| = {worst:e}");
+    // Unit vectors (or zero for an all-zero feature; negatives are stored in f16, so only
+    // unit to f16 precision), and not all the same.
+    for (k, e) in got.chunks_exact(16).enumerate() {
+        let n = e.iter().map(|x| x * x).sum::<f32>().sqrt();
+        let tol = if k < 9 { 1e-5 } else { 1e-3 };
+        assert!(n == 0.0 || (n - 1.0).abs() < tol, "embedding {k}: norm {n}");
+    }
+    assert!(got[..16] != got[16..32]);
+}

@@ -29,6 +29,13 @@ fn main() {
             )
             .unwrap();
         }
+        if v.name == dlgs_tests::vectors::LAED_VECTOR {
+            let e: Vec<u8> = dlgs_tests::vectors::laed_embeddings(&v.bytes)
+                .iter()
+                .flat_map(|x| x.to_le_bytes())
+                .collect();
+            std::fs::write(root.join(dir).join(format!("{}.embeddings.f32", v.name)), e).unwrap();
+        }
         match v.error {
             None => {
                 for l in dlgs_tests::vectors::expected_lines(&v) {
@@ -60,6 +67,13 @@ the last bits differ between platforms.\n",
         times = dlgs_tests::vectors::FRAME_TIMES,
         cam = dlgs_tests::vectors::FRAME_CAMERA,
         tol = dlgs_tests::vectors::FRAME_TOLERANCE,
+    ));
+    readme.push_str(&format!(
+        "\n## Language decoder\n\n`valid/{name}.embeddings.f32` holds what a decoder must produce from the `LAED` chunk \
+of `valid/{name}.dlgs` (format-spec/dlgs.md §6.8): for each of the 3 Gaussians in file order and each of its 3 \
+language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened to f32, f32 arithmetic); then the \
+16 values of each negative, in stored order. f32 little-endian. A decoder conforms if every value is within 1e-6.\n",
+        name = dlgs_tests::vectors::LAED_VECTOR,
     ));
     std::fs::write(root.join("README.md"), readme).unwrap();
     println!("wrote {}", root.display());
