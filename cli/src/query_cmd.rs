@@ -111,6 +111,11 @@ pub struct QueryArgs {
     /// Smoothing filter size applied to the thresholded mask.
     #[arg(long, default_value_t = 7)]
     pub smooth_kernel: usize,
+    /// Empty mask when the chosen level's score (mean relevance inside the mask) is below
+    /// this: the text does not beat the negatives anywhere (0 = the reference, which then
+    /// stretches noise to a mask).
+    #[arg(long, default_value_t = 0.5)]
+    pub min_score: f32,
     /// Output prefix: PREFIX.mask.png, PREFIX.heat.png, PREFIX.overlay.png (with several
     /// cameras or embeddings, _<camera>_<name> is appended).
     #[arg(short, long)]
@@ -146,6 +151,7 @@ pub fn run_query(a: &QueryArgs) -> Result<()> {
         threshold: a.threshold,
         smooth_kernel: a.smooth_kernel,
         level: a.source.level(levels)?,
+        min_score: a.min_score,
     };
     if let Some(parent) = a.output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)?;

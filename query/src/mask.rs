@@ -22,6 +22,10 @@ pub struct MaskParams {
     pub smooth_kernel: usize,
     /// Force a level (0-based) instead of choosing by score.
     pub level: Option<usize>,
+    /// The mask is empty when the chosen level's score is below this. Not in the reference:
+    /// its min-max normalisation stretches an image where the text wins nowhere (relevance
+    /// ~0.1 everywhere) to a full mask; 0.5 = "the text beats the negatives". 0 = reference.
+    pub min_score: f32,
 }
 
 impl Default for MaskParams {
@@ -31,6 +35,7 @@ impl Default for MaskParams {
             threshold: 0.4,
             smooth_kernel: 7,
             level: None,
+            min_score: 0.5,
         }
     }
 }
@@ -129,6 +134,27 @@ pub fn smoothed_mask(normalised: &[f32], w: usize, h: usize, p: &MaskParams) -> 
     sums.iter().map(|&s| s / full > 0.5).collect()
 }
 
+/// Steps 5-6: the level (forced, or the first with the largest score) and its smoothed mask,
+/// empty when that level's score is below `min_score`.
+fn level_and_mask(maps: &[LevelMaps], w: usize, h: usize, p: &MaskParams) -> (usize, Vec<bool>) {
+    let level = p.level.unwrap_or_else(|| {
+        // First level with the largest score (ties go to the finer level).
+        let mut best = 0;
+        for (i, m) in maps.iter().enumerate() {
+            if m.score > maps[best].score {
+                best = i;
+            }
+        }
+        best
+    });
+    let mask = if maps[level].score < p.min_score {
+        vec![false; w * h]
+    } else {
+        smoothed_mask(&maps[level].normalised, w, h, p)
+    };
+    (level, mask)
+}
+
 /// Answer every positive of `field` on a rendered language image: `features` holds
 /// `levels * dims` values per pixel (level-major within a pixel, as rendered).
 pub fn query_levels(
@@ -165,17 +191,7 @@ pub fn query_levels(
                     level_maps(rel, width, height, params)
                 })
                 .collect();
-            let level = params.level.unwrap_or_else(|| {
-                // First level with the largest score (ties go to the finer level).
-                let mut best = 0;
-                for (i, m) in maps.iter().enumerate() {
-                    if m.score > maps[best].score {
-                        best = i;
-                    }
-                }
-                best
-            });
-            let mask = smoothed_mask(&maps[level].normalised, width, height, params);
+            let (level, mask) = level_and_mask(&maps, width, height, params);
             ImageQuery {
                 width,
                 height,
@@ -185,4 +201,72 @@ pub fn query_levels(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 64x48 relevance image: `inside` in a 20x16 block, `outside` elsewhere, plus a
+    /// deterministic ripple so that min-max normalisation has something to stretch.
+    fn image(inside: f32, outside: f32) -> Vec<f32> {
+        (0..64 * 48)
+            .map(|i| {
+                let (x, y) = (i % 64, i / 64);
+                let base = if (20..40).contains(&x) && (16..32).contains(&y) {
+                    inside
+                } else {
+                    outside
+                };
+                base + 0.002 * ((i * 7919 % 13) as f32 / 13.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_visible_object_is_masked_and_an_absent_one_is_not() {
+        let p = MaskParams {
+            mean_kernel: 1,
+            ..MaskParams::default()
+        };
+        let visible = [level_maps(image(0.95, 0.1), 64, 48, &p)];
+        let (_, mask) = level_and_mask(&visible, 64, 48, &p);
+        let on = mask.iter().filter(|&&m| m).count();
+        assert!(
+            (300..=320).contains(&on),
+            "{on} pixels for a 320-pixel object"
+        );
+        assert!(visible[0].score > 0.9);
+
+        // Relevance ~0.1 everywhere: the reference's normalisation would mask the ripple.
+        let absent = [level_maps(image(0.11, 0.1), 64, 48, &p)];
+        assert!(absent[0].score < 0.2);
+        let (_, mask) = level_and_mask(&absent, 64, 48, &p);
+        assert!(mask.iter().all(|&m| !m));
+        let reference = MaskParams {
+            min_score: 0.0,
+            ..p
+        };
+        let (_, mask) = level_and_mask(&absent, 64, 48, &reference);
+        assert!(mask.iter().filter(|&&m| m).count() > 100);
+    }
+
+    #[test]
+    fn the_level_with_the_best_score_wins_and_can_be_forced() {
+        let p = MaskParams {
+            mean_kernel: 1,
+            ..MaskParams::default()
+        };
+        let maps = [
+            level_maps(image(0.6, 0.1), 64, 48, &p),
+            level_maps(image(0.9, 0.1), 64, 48, &p),
+            level_maps(image(0.9, 0.1), 64, 48, &p),
+        ];
+        assert_eq!(level_and_mask(&maps, 64, 48, &p).0, 1);
+        let forced = MaskParams {
+            level: Some(0),
+            ..p
+        };
+        assert_eq!(level_and_mask(&maps, 64, 48, &forced).0, 0);
+    }
 }
