@@ -65,4 +65,10 @@ $B labels "$FRUIT" --annotations "$DATA/ply/supersplat_fruit_drops_minimal.annot
 $B encode "$OUT/labels/scene.ply" -o "$OUT/labels.dlgs" --lang-decoder "$OUT/labels/lang_decoder.safetensors" --negatives "$OUT/labels/negatives.npy"
 $B query "$OUT/labels.dlgs" --text-embedding "$OUT/labels/category_4.npy" --view 0 -o "$OUT/query/category_4" --timing
 $B export "$OUT/labels.dlgs" --select "$OUT/labels/category_4.npy" -o "$OUT/query/category_4.ply"
+echo "== players: stream the 5-GOP residual file in real time, export frames as SPZ for other viewers"
+$B play "$OUT/residual.dlgs"
+cat "$OUT/residual.dlgs" | $B play - --max-speed
+$B export "$OUT/residual.dlgs" --frames 118..122 --format spz -o "$OUT/frames_spz"
+echo "== RD sweep of the time features (crf) x canonical quality on the dynamic model"
+$B rd "$OUT/dynamic_exact.dlgs" --crf 6,18 --quality lossless,high --times 2 --orbit 2 --width 676 --height 507 -o "$OUT/rd"
 echo "outputs in $OUT/"
