@@ -7,8 +7,9 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::interop::spz_write::{write_spz, SpzVersion};
 use dlgs::Gaussians;
+use dlgs_query::RelevanceField;
 
-use crate::query_cmd::{self, SelectArgs};
+use crate::query_cmd::{SelectArgs, Selection};
 use crate::scene_io::Source;
 
 #[derive(Args, Debug)]
@@ -95,17 +96,35 @@ fn parse_frames(s: &str, frame_count: u32) -> Result<(u32, u32)> {
     Ok((a, end))
 }
 
-/// The Gaussians shown at `t` seen from the default orbit's first camera (view-dependent
-/// decoders need a viewpoint), with the language evaluated, optionally only a selection.
-fn frame(src: &mut Source, t: f64, select: Option<&SelectArgs>) -> Result<Gaussians> {
-    let canon = src.canonical(t)?;
-    let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
-        .first()
-        .map_or([0.0; 3], |c| c.position.to_array());
-    let g = src.at(t, eye, canon.has_language())?;
-    match select {
-        Some(s) => query_cmd::apply_selection(s, src, g),
-        None => Ok(g),
+/// Decodes the frames of one export: view-dependent decoders see the default orbit's first
+/// camera (placed around the canonical Gaussians of the GOP shown, recomputed only when the
+/// GOP changes), the language is evaluated, and a `--select` query is applied when given.
+struct Frames<'s> {
+    src: Source,
+    /// (GOP, viewpoint, scene has language) of the last frame.
+    view: Option<(Option<u32>, [f32; 3], bool)>,
+    select: Option<(&'s Selection, RelevanceField<'s>)>,
+}
+
+impl Frames<'_> {
+    fn at(&mut self, t: f64) -> Result<Gaussians> {
+        let gop = self.src.gop_at(t);
+        let (eye, language) = match self.view {
+            Some((g, eye, language)) if g == gop => (eye, language),
+            _ => {
+                let canon = self.src.canonical(t)?;
+                let eye = dlgs_render::orbit_cameras(&canon, &Default::default())
+                    .first()
+                    .map_or([0.0; 3], |c| c.position.to_array());
+                self.view = Some((gop, eye, canon.has_language()));
+                (eye, canon.has_language())
+            }
+        };
+        let g = self.src.at(t, eye, language)?;
+        match &self.select {
+            Some((s, field)) => s.apply(field, g),
+            None => Ok(g),
+        }
     }
 }
 
@@ -113,14 +132,8 @@ fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
-fn export_one(
-    src: &mut Source,
-    t: f64,
-    format: &Format,
-    select: Option<&SelectArgs>,
-    output: &Path,
-) -> Result<()> {
-    let g = frame(src, t, select)?;
+fn export_one(frames: &mut Frames, t: f64, format: &Format, output: &Path) -> Result<()> {
+    let g = frames.at(t)?;
     write(output, &format.encode(&g)?)?;
     println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
     Ok(())
@@ -128,17 +141,32 @@ fn export_one(
 
 /// `dlgs decode`: the Gaussians at `t` as a PLY with every attribute the file has.
 pub fn run_decode(file: &Path, t: f64, output: &Path) -> Result<()> {
-    let mut src = Source::open(file)?;
-    export_one(&mut src, t, &Format::Ply { extras: true }, None, output)
+    let mut frames = Frames {
+        src: Source::open(file)?,
+        view: None,
+        select: None,
+    };
+    export_one(&mut frames, t, &Format::Ply { extras: true }, output)
 }
 
 pub fn run_export(a: &ExportArgs) -> Result<()> {
     let format = Format::parse(a)?;
     let mut src = Source::open(&a.file)?;
-    let Some(range) = &a.frames else {
-        return export_one(&mut src, a.t, &format, Some(&a.select), &a.output);
+    let selection = Selection::load(&a.select, &mut src, a.t)?;
+    let select = match &selection {
+        Some(s) => Some((s, s.field()?)),
+        None => None,
     };
-    let (file_fps, frame_count) = src.timing().context("--frames needs a .dlgs stream")?;
+    let timing = src.timing();
+    let mut frames = Frames {
+        src,
+        view: None,
+        select,
+    };
+    let Some(range) = &a.frames else {
+        return export_one(&mut frames, a.t, &format, &a.output);
+    };
+    let (file_fps, frame_count) = timing.context("--frames needs a .dlgs stream")?;
     let (first, end) = parse_frames(range, frame_count)?;
     let (t0, t1) = (first as f64 / file_fps, end as f64 / file_fps);
     let times: Vec<f64> = match a.fps {
@@ -158,7 +186,7 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
     );
     let mut bytes = 0usize;
     for (i, &t) in times.iter().enumerate() {
-        let g = frame(&mut src, t, Some(&a.select))?;
+        let g = frames.at(t)?;
         let data = format.encode(&g)?;
         bytes += data.len();
         write(

@@ -225,14 +225,14 @@ fn play_loop(
     r.wall_s = clock_start.map_or(0.0, |s| s.elapsed().as_secs_f64());
     if !decode_ms.is_empty() {
         let n = decode_ms.len() as f64;
-        r.frame_decode_ms_mean = decode_ms.iter().sum::<f64>() / n;
-        let mut sorted = decode_ms.clone();
-        sorted.sort_by(f64::total_cmp);
-        r.frame_decode_ms_p95 = sorted[((n * 0.95) as usize).min(sorted.len() - 1)];
-        r.frame_decode_ms_max = *sorted.last().expect("non-empty");
+        let frames_ms = decode_ms.iter().sum::<f64>();
+        r.frame_decode_ms_mean = frames_ms / n;
+        decode_ms.sort_by(f64::total_cmp);
+        r.frame_decode_ms_p95 = decode_ms[((n * 0.95) as usize).min(decode_ms.len() - 1)];
+        r.frame_decode_ms_max = *decode_ms.last().expect("non-empty");
         // GOP decoding runs on the reader thread, in parallel with frame decoding; the
         // sustained rate counts both, as if they shared one thread.
-        let total_ms = decode_ms.iter().sum::<f64>() + r.gop_decode_ms.iter().sum::<f64>();
+        let total_ms = frames_ms + r.gop_decode_ms.iter().sum::<f64>();
         r.sustained_decode_fps = n / (total_ms / 1e3);
     }
     Ok(r)

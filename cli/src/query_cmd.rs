@@ -278,66 +278,110 @@ pub struct SelectArgs {
     pub exact: bool,
 }
 
-/// Apply `--select` to the Gaussians of a frame.
-pub fn apply_selection(a: &SelectArgs, src: &mut Source, g: Gaussians) -> Result<Gaussians> {
-    let Some(sel) = &a.select else {
-        return Ok(g);
-    };
-    let qs = QuerySource {
-        text_embedding: sel.clone(),
-        negatives: a.negatives.clone(),
-        lang_decoder: a.lang_decoder.clone(),
-        temperature: dlgs_query::relevance::TEMPERATURE,
-        exact: a.exact,
-        table: dlgs_query::relevance::DEFAULT_TABLE,
-        level: a.level,
-    };
-    let (dec, positives, negatives) = qs.load(src)?;
-    let (levels, dims) = lang_shape(src, &g)?;
-    let field = RelevanceField::new(&dec, &positives, &negatives, qs.precision())?;
-    let t = Instant::now();
-    let s = select_gaussians(
-        &g,
-        levels,
-        dims,
-        &field,
-        0,
-        a.select_threshold,
-        qs.level(levels)?,
-    )?;
-    eprintln!(
-        "selected {} of {} Gaussians for '{}' at level {} ({:.1} ms)",
-        s.count(),
-        g.len(),
-        positives.names[0],
-        s.level + 1,
-        ms(t)
-    );
-    let mut out = Gaussians::new(g.sh_degree, g.lang_width);
-    match a.action.as_str() {
-        "keep" | "delete" => {
-            let keep = a.action == "keep";
-            for i in 0..g.len() {
-                if s.selected[i] == keep {
-                    out.push_from(&g, i);
+/// A `--select` query loaded once (decoder, embeddings, language shape) and applied to any
+/// number of frames; the relevance field built from it keeps its decoded table across frames.
+pub struct Selection {
+    args: SelectArgs,
+    dec: LangDecoder,
+    positives: Embeddings,
+    negatives: Embeddings,
+    precision: Precision,
+    levels: usize,
+    dims: usize,
+    level: Option<usize>,
+}
+
+impl Selection {
+    /// `None` without `--select`. `t`: a time of the scene (PLY scenes' language shape).
+    pub fn load(a: &SelectArgs, src: &mut Source, t: f64) -> Result<Option<Self>> {
+        let Some(sel) = &a.select else {
+            return Ok(None);
+        };
+        let qs = QuerySource {
+            text_embedding: sel.clone(),
+            negatives: a.negatives.clone(),
+            lang_decoder: a.lang_decoder.clone(),
+            temperature: dlgs_query::relevance::TEMPERATURE,
+            exact: a.exact,
+            table: dlgs_query::relevance::DEFAULT_TABLE,
+            level: a.level,
+        };
+        let (dec, positives, negatives) = qs.load(src)?;
+        let (levels, dims) = match src.language_shape() {
+            Some(shape) => shape,
+            None => {
+                let sample = src.canonical(t)?;
+                lang_shape(src, &sample)?
+            }
+        };
+        Ok(Some(Selection {
+            args: a.clone(),
+            dec,
+            positives,
+            negatives,
+            precision: qs.precision(),
+            levels,
+            dims,
+            level: qs.level(levels)?,
+        }))
+    }
+
+    pub fn field(&self) -> Result<RelevanceField<'_>> {
+        Ok(RelevanceField::new(
+            &self.dec,
+            &self.positives,
+            &self.negatives,
+            self.precision,
+        )?)
+    }
+
+    /// Keep, delete or highlight the selected Gaussians of `g`.
+    pub fn apply(&self, field: &RelevanceField, g: Gaussians) -> Result<Gaussians> {
+        let a = &self.args;
+        let t = Instant::now();
+        let s = select_gaussians(
+            &g,
+            self.levels,
+            self.dims,
+            field,
+            0,
+            a.select_threshold,
+            self.level,
+        )?;
+        eprintln!(
+            "selected {} of {} Gaussians for '{}' at level {} ({:.1} ms)",
+            s.count(),
+            g.len(),
+            self.positives.names[0],
+            s.level + 1,
+            ms(t)
+        );
+        let mut out = Gaussians::new(g.sh_degree, g.lang_width);
+        match a.action.as_str() {
+            "keep" | "delete" => {
+                let keep = a.action == "keep";
+                for i in 0..g.len() {
+                    if s.selected[i] == keep {
+                        out.push_from(&g, i);
+                    }
                 }
             }
-        }
-        "highlight" => {
-            out = g.clone();
-            let c = dlgs::model::sh_coeffs(g.sh_degree);
-            for i in (0..g.len()).filter(|&i| s.selected[i]) {
-                // SH DC of pure red, view-independent.
-                let sh = &mut out.sh[i * 3 * c..(i + 1) * 3 * c];
-                sh.fill(0.0);
-                sh[0] = (1.0 - 0.5) / 0.282_094_8;
-                sh[1] = -0.5 / 0.282_094_8;
-                sh[2] = -0.5 / 0.282_094_8;
+            "highlight" => {
+                out = g.clone();
+                let c = dlgs::model::sh_coeffs(g.sh_degree);
+                for i in (0..g.len()).filter(|&i| s.selected[i]) {
+                    // SH DC of pure red, view-independent.
+                    let sh = &mut out.sh[i * 3 * c..(i + 1) * 3 * c];
+                    sh.fill(0.0);
+                    sh[0] = (1.0 - 0.5) / 0.282_094_8;
+                    sh[1] = -0.5 / 0.282_094_8;
+                    sh[2] = -0.5 / 0.282_094_8;
+                }
             }
+            v => bail!("--action {v}: expected keep, delete or highlight"),
         }
-        v => bail!("--action {v}: expected keep, delete or highlight"),
+        Ok(out)
     }
-    Ok(out)
 }
 
 #[derive(Args, Debug, Clone)]

@@ -79,6 +79,14 @@ impl Source {
         }
     }
 
+    /// The GOP shown at `t` (`None` for a still scene file or a time outside the stream).
+    pub fn gop_at(&self, t: f64) -> Option<u32> {
+        match self {
+            Source::Splat(_) => None,
+            Source::Dlgs(dec, _) => dec.scene().locate(t).ok().map(|p| p.gop),
+        }
+    }
+
     /// The file's language decoder (`.dlgs` with a `LAED` chunk), if any.
     pub fn lang_decoder(&mut self) -> Result<Option<dlgs::model::lang_decoder::LangDecoder>> {
         match self {

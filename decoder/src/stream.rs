@@ -49,26 +49,7 @@ impl<R: Read> StreamDecoder<R> {
             ended: false,
             last_decode: Duration::ZERO,
         };
-        loop {
-            let at = d.stream.position();
-            match d.stream.next_event()? {
-                Some(StreamEvent::SceneChunk(c, p)) => d.scene_chunks.push((c, p)),
-                Some(StreamEvent::GopStart(g, h)) => {
-                    d.open = Some((g, h, at));
-                    break;
-                }
-                Some(StreamEvent::End(_)) | None => {
-                    d.finish()?;
-                    break;
-                }
-                Some(StreamEvent::GopChunk(c, _)) => {
-                    return Err(Error::new(
-                        ErrorKind::Order("a GOP chunk before any GOPH"),
-                        c.offset,
-                    ))
-                }
-            }
-        }
+        d.read_until_next_gop(false)?;
         Ok(d)
     }
 
@@ -100,30 +81,40 @@ impl<R: Read> StreamDecoder<R> {
             return Ok(None);
         };
         self.chunks.clear();
+        self.read_until_next_gop(true)?;
+        let t0 = Instant::now();
+        let gop = self.decode_collected(g, &header, gop_at)?;
+        self.last_decode = t0.elapsed();
+        Ok(Some(gop))
+    }
+
+    /// Read events up to the next GOP start (remembered in `open`) or the end of the stream:
+    /// scene-level chunks before the first GOP (`in_gop` false), the GOP's chunks inside one.
+    fn read_until_next_gop(&mut self, in_gop: bool) -> Result<()> {
         loop {
             let at = self.stream.position();
             match self.stream.next_event()? {
-                Some(StreamEvent::GopChunk(c, p)) => self.chunks.push((c, p)),
-                Some(StreamEvent::GopStart(next, h)) => {
-                    self.open = Some((next, h, at));
-                    break;
+                Some(StreamEvent::SceneChunk(c, p)) if !in_gop => self.scene_chunks.push((c, p)),
+                Some(StreamEvent::GopChunk(c, p)) if in_gop => self.chunks.push((c, p)),
+                Some(StreamEvent::GopStart(g, h)) => {
+                    self.open = Some((g, h, at));
+                    return Ok(());
                 }
-                Some(StreamEvent::End(_)) | None => {
-                    self.finish()?;
-                    break;
-                }
+                Some(StreamEvent::End(_)) | None => return self.finish(),
                 Some(StreamEvent::SceneChunk(c, _)) => {
                     return Err(Error::new(
                         ErrorKind::Order("a scene-level chunk after the first GOP"),
                         c.offset,
                     ))
                 }
+                Some(StreamEvent::GopChunk(c, _)) => {
+                    return Err(Error::new(
+                        ErrorKind::Order("a GOP chunk before any GOPH"),
+                        c.offset,
+                    ))
+                }
             }
         }
-        let t0 = Instant::now();
-        let gop = self.decode_collected(g, &header, gop_at)?;
-        self.last_decode = t0.elapsed();
-        Ok(Some(gop))
     }
 
     /// How long decoding the last GOP took, without the time its bytes took to arrive.
@@ -154,20 +145,22 @@ impl<R: Read> StreamDecoder<R> {
                 }
             },
         };
-        let chunks = &self.chunks;
-        let payload = |c: &ChunkInfo| {
+        // Each payload is read once (the canonical or residual chunk, then TFEA and MLPW):
+        // hand it over instead of copying it.
+        let chunks = &mut self.chunks;
+        let mut payload = |c: &ChunkInfo| {
             chunks
-                .iter()
+                .iter_mut()
                 .find(|(i, _)| i.offset == c.offset)
-                .map(|(_, p)| p.clone())
+                .map(|(_, p)| std::mem::take(p))
                 .ok_or_else(|| Error::new(ErrorKind::MissingChunk(c.ty), c.offset))
         };
-        let state = build::state(&scene, &self.limits, &infos, gop_at, base, payload)?;
+        let state = build::state(&scene, &self.limits, &infos, gop_at, base, &mut payload)?;
         if g == 0 {
             self.first = Some(state.clone());
         }
         self.last = Some((g, state.clone()));
-        let gop = build::gop(&scene, &self.limits, g, &infos, gop_at, state, payload)?;
+        let gop = build::gop(&scene, &self.limits, g, &infos, gop_at, state, &mut payload)?;
         Ok(Arc::new(gop))
     }
 

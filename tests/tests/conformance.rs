@@ -75,24 +75,34 @@ fn committed_vectors_equal_what_the_generator_builds() {
     }
 }
 
-#[test]
-fn dynamic_vector_decodes_to_the_listed_frames() {
-    let name = vectors::DYNAMIC_VECTOR;
-    let bytes = std::fs::read(root().join("valid").join(format!("{name}.dlgs"))).unwrap();
-    let want: Vec<f32> = std::fs::read(root().join("valid").join(format!("{name}.frames.f32")))
+/// A valid vector's bytes and its listed decoded values (`valid/<name>.<kind>.f32`).
+fn vector_and_values(name: &str, kind: &str) -> (Vec<u8>, Vec<f32>) {
+    let valid = root().join("valid");
+    let bytes = std::fs::read(valid.join(format!("{name}.dlgs"))).unwrap();
+    let values = std::fs::read(valid.join(format!("{name}.{kind}.f32")))
         .unwrap()
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
         .collect();
+    (bytes, values)
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn dynamic_vector_decodes_to_the_listed_frames() {
+    let name = vectors::DYNAMIC_VECTOR;
+    let (bytes, want) = vector_and_values(name, "frames");
     let got = vectors::dynamic_frames(&bytes);
     // 128 dynamic Gaussians x (3+3+4+1+1+48+9) values x 5 times.
     assert_eq!(got.len(), 128 * 69 * vectors::FRAME_TIMES.len());
     assert_eq!(got.len(), want.len());
-    let worst = got
-        .iter()
-        .zip(&want)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0f32, f32::max);
+    let worst = max_abs_diff(&got, &want);
     println!("{name}: max |decoded - listed| = {worst:e}");
     assert!(worst <= vectors::FRAME_TOLERANCE, "{worst}");
     // The frames move: the listed times are not all the same frame.
@@ -103,21 +113,12 @@ fn dynamic_vector_decodes_to_the_listed_frames() {
 #[test]
 fn language_decoder_vector_decodes_to_the_listed_embeddings() {
     let name = vectors::LAED_VECTOR;
-    let bytes = std::fs::read(root().join("valid").join(format!("{name}.dlgs"))).unwrap();
-    let want: Vec<f32> = std::fs::read(root().join("valid").join(format!("{name}.embeddings.f32")))
-        .unwrap()
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-        .collect();
+    let (bytes, want) = vector_and_values(name, "embeddings");
     let got = vectors::laed_embeddings(&bytes);
     // 3 Gaussians x 3 levels x 16 dims, then 2 negatives x 16.
     assert_eq!(got.len(), 3 * 3 * 16 + 2 * 16);
     assert_eq!(got.len(), want.len());
-    let worst = got
-        .iter()
-        .zip(&want)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0f32, f32::max);
+    let worst = max_abs_diff(&got, &want);
     assert!(worst <= 1e-6, "{name}: max |decoded - listed| = {worst:e}");
     // Unit vectors (or zero for an all-zero feature; negatives are stored in f16, so only
     // unit to f16 precision), and not all the same.
