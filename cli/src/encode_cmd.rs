@@ -241,7 +241,7 @@ fn meta(input: &Path, extra: serde_json::Value) -> serde_json::Value {
     })
 }
 
-fn bar(len: u64, what: &str) -> ProgressBar {
+pub(crate) fn bar(len: u64, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len);
     pb.set_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} GOPs, {elapsed}")

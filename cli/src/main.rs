@@ -4,6 +4,7 @@ mod cameras_arg;
 mod encode_cmd;
 mod export_cmd;
 mod info;
+mod ingest_cmd;
 mod play_cmd;
 mod query_cmd;
 mod rd_cmd;
@@ -41,10 +42,17 @@ enum Cmd {
     },
     /// Read every chunk of a .dlgs file and check every CRC and index entry.
     Verify { file: PathBuf },
-    /// Encode a splat scene (PLY, .splat, SPZ) into a single-frame .dlgs, or re-encode a
-    /// .dlgs stream (e.g. a lossless `dlgs synth` model) with other settings.
+    /// Encode a splat scene (PLY, .splat, SPZ) into a single-frame .dlgs, re-encode a .dlgs
+    /// stream (e.g. a lossless `dlgs synth` model) with other settings, or re-pack a model
+    /// trained with the DLGStream reference implementation: give its GOP output folders (each
+    /// `gop<g>_<postfix>` or its `compression/best/jxl_quant`, in GOP order) or the scene
+    /// folder holding them. Lossless by default (decodes to the reference decoder's tensors).
     Encode {
-        input: PathBuf,
+        #[arg(required = true, num_args = 1..)]
+        input: Vec<PathBuf>,
+        /// Frame rate of a reference run (the reference's N3DV videos: 30).
+        #[arg(long, default_value_t = 30)]
+        fps: u32,
         #[arg(short, long)]
         output: PathBuf,
         /// Change the residual mode when re-encoding a .dlgs (intra, sequential, parallel);
@@ -177,10 +185,19 @@ fn main() -> Result<()> {
         Cmd::Verify { file } => info::run_verify(&file),
         Cmd::Encode {
             input,
+            fps,
             output,
             residual_mode,
             codec,
-        } => encode_cmd::run_encode(&input, &output, &codec, residual_mode.as_deref()),
+        } => {
+            if input.iter().all(|p| p.is_dir()) {
+                ingest_cmd::run_ingest(&input, &output, &codec, fps)
+            } else if let [one] = input.as_slice() {
+                encode_cmd::run_encode(one, &output, &codec, residual_mode.as_deref())
+            } else {
+                anyhow::bail!("several inputs must all be reference GOP folders")
+            }
+        }
         Cmd::Seek { file, count, seed } => seek_cmd::run_seek(&file, count, seed),
         Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
         Cmd::Synth(args) => encode_cmd::run_synth(&args),

@@ -98,6 +98,7 @@ pub(crate) fn gop(
             TfeaBody::Hevc {
                 tiling,
                 ranges,
+                reference,
                 packets,
             } => {
                 let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
@@ -108,7 +109,10 @@ pub(crate) fn gop(
                     tiling.keys,
                 )
                 .map_err(|e| video_error(e, at))?;
-                time_features::untile(&video.frames, &tiling, &ranges)
+                match reference {
+                    Some(range) => time_features::untile_reference(&video.frames, &tiling, range),
+                    None => time_features::untile(&video.frames, &tiling, &ranges),
+                }
             }
         };
         let p = payload(&mlpw)?;

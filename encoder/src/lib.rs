@@ -234,13 +234,25 @@ impl<W: Write> StreamEncoder<W> {
 
     /// Append the next GOP from its canonical state or residual field.
     pub fn push(&mut self, canonical: GopCanonical, dynamic: Option<&DynamicGop>) -> Result<()> {
+        self.push_coded(canonical, dynamic, None)
+    }
+
+    /// As [`Self::push`], with the time features already coded (`coded`, e.g. a trained model's
+    /// own HEVC stream passed through unchanged); `dynamic.features` must be what `coded`
+    /// decodes to, for the caller's own checks.
+    pub fn push_coded(
+        &mut self,
+        canonical: GopCanonical,
+        dynamic: Option<&DynamicGop>,
+        coded: Option<&TfeaBody>,
+    ) -> Result<()> {
         let s = self.writer.scene().clone();
         if let GopCanonical::State(canon) = canonical {
             check_layout(canon, &s)?;
         }
         let dyn_chunks = match (s.n_dynamic > 0, dynamic) {
             (false, None) => None,
-            (true, Some(d)) => Some(self.dynamic_payloads(d)?),
+            (true, Some(d)) => Some(self.dynamic_payloads(d, coded)?),
             (true, None) => {
                 return Err(invalid(
                     "the scene has dynamic Gaussians but the GOP has no deformation field".into(),
@@ -345,7 +357,11 @@ impl<W: Write> StreamEncoder<W> {
         })
     }
 
-    fn dynamic_payloads(&self, d: &DynamicGop) -> Result<(Vec<u8>, Vec<u8>)> {
+    fn dynamic_payloads(
+        &self,
+        d: &DynamicGop,
+        coded: Option<&TfeaBody>,
+    ) -> Result<(Vec<u8>, Vec<u8>)> {
         let s = self.writer.scene();
         let f = &d.features;
         if f.n != s.n_dynamic as usize
@@ -365,9 +381,10 @@ impl<W: Write> StreamEncoder<W> {
         }
         dlgs::model::dynamic::check_finite("time features", &f.data)?;
         d.mlps.validate(s, 0).map_err(|e| invalid(e.to_string()))?;
-        let body = match &self.cfg.features {
-            FeatureCodec::Exact => TfeaBody::Exact(f.clone()),
-            FeatureCodec::Hevc(settings) => {
+        let body = match (&self.cfg.features, coded) {
+            (_, Some(c)) => c.clone(),
+            (FeatureCodec::Exact, None) => TfeaBody::Exact(f.clone()),
+            (FeatureCodec::Hevc(settings), None) => {
                 let tiling = Tiling::for_count(f.n, f.keys, f.channels);
                 let ranges = time_features::ranges(f, self.cfg.per_gop_range);
                 let video = dlgs_video::Gray12 {
@@ -380,6 +397,7 @@ impl<W: Write> StreamEncoder<W> {
                 TfeaBody::Hevc {
                     tiling,
                     ranges,
+                    reference: None,
                     packets,
                 }
             }

@@ -19,12 +19,15 @@ fuzz_target!(|data: &[u8]| {
             ld.decode_one(&vec![0.25; ld.input_dims()], &mut out);
         }
     } else if sel & 1 == 0 {
-        if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, packets }) =
+        if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, reference, packets }) =
             dlgs::payload::time_features::decode(body, 0, &s, &limits)
         {
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
             if let Ok(v) = dlgs_video::decode_gray12(&refs, tiling.width() as u32, tiling.height() as u32, tiling.keys) {
-                let _ = dlgs::payload::time_features::untile(&v.frames, &tiling, &ranges);
+                let _ = match reference {
+                    Some(r) => dlgs::payload::time_features::untile_reference(&v.frames, &tiling, r),
+                    None => dlgs::payload::time_features::untile(&v.frames, &tiling, &ranges),
+                };
             }
         }
     } else {

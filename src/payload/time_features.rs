@@ -22,8 +22,11 @@ pub enum TfeaBody {
     /// Quantised 12-bit tiles coded as an HEVC stream, packets in decode order.
     Hevc {
         tiling: Tiling,
-        /// One (lo, hi) per channel.
+        /// One (lo, hi) per channel (codec 1); empty for codec 2.
         ranges: Vec<(f32, f32)>,
+        /// Codec 2: the reference implementation's dequantisation with its one f64 range
+        /// (see [`untile_reference`]); `ranges` is then unused.
+        reference: Option<(f64, f64)>,
         packets: Vec<Vec<u8>>,
     },
 }
@@ -156,6 +159,24 @@ pub fn untile(images: &[Vec<u16>], t: &Tiling, ranges: &[(f32, f32)]) -> TimeFea
     f
 }
 
+/// Codec 2 (the reference implementation's decoder, `test_fdsd.py`): each 12-bit sample `v`
+/// is expanded to 16 bits as FFmpeg's `gray16` output does (`v << 4 | v >> 8`), then
+/// `f32((v16 / 65535) * (hi - lo) + lo)` evaluated in f64 in this order.
+pub fn untile_reference(images: &[Vec<u16>], t: &Tiling, (lo, hi): (f64, f64)) -> TimeFeatures {
+    let mut f = TimeFeatures::zeros(t.n, t.keys, t.channels);
+    for (k, img) in images.iter().enumerate().take(t.keys) {
+        for i in 0..t.n {
+            let dst = f.at_mut(i, k);
+            for c in 0..t.channels {
+                let v12 = img[t.pixel(i, c)] as u32;
+                let v16 = (v12 << 4) | (v12 >> 8);
+                dst[c] = ((v16 as f64 / 65535.0) * (hi - lo) + lo) as f32;
+            }
+        }
+    }
+    f
+}
+
 /// Serialise a `TFEA` payload.
 pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
     let mut b = Vec::new();
@@ -177,15 +198,26 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
         TfeaBody::Hevc {
             tiling,
             ranges,
+            reference,
             packets,
         } => {
-            b.put_u8(1);
+            b.put_u8(if reference.is_some() { 2 } else { 1 });
             b.put_u8(12);
             b.put_u16(tiling.channels as u16);
             b.put_u32(tiling.n as u32);
             b.put_u32(tiling.keys as u32);
             b.put_u32(tiling.side as u32);
-            for &(lo, hi) in ranges {
+            if let Some((lo, hi)) = *reference {
+                if !lo.is_finite() || !hi.is_finite() {
+                    return Err(Error::new(
+                        ErrorKind::InvalidInput("time-feature range not finite".into()),
+                        0,
+                    ));
+                }
+                b.extend_from_slice(&lo.to_le_bytes());
+                b.extend_from_slice(&hi.to_le_bytes());
+            }
+            for &(lo, hi) in ranges.iter().filter(|_| reference.is_none()) {
                 if !lo.is_finite() || !hi.is_finite() {
                     return Err(Error::new(
                         ErrorKind::InvalidInput("time-feature range not finite".into()),
@@ -259,7 +291,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 data,
             }))
         }
-        (1, 12) => {
+        (1 | 2, 12) => {
             let tiling = Tiling {
                 n,
                 keys,
@@ -283,10 +315,25 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             let pixels = (tiling.width() * tiling.height()) as u64 * keys as u64 * 2;
             limits.check_alloc("TFEA decoded images", pixels, at)?;
             let mut ranges = Vec::with_capacity(channels);
-            for _ in 0..channels {
-                let lo = r.finite_f32("TFEA range lo")?;
-                let hi = r.finite_f32("TFEA range hi")?;
-                ranges.push((lo, hi));
+            let mut reference = None;
+            if codec == 2 {
+                let lo = f64::from_le_bytes(r.take(8, "TFEA reference lo")?.try_into().expect("8"));
+                let hi = f64::from_le_bytes(r.take(8, "TFEA reference hi")?.try_into().expect("8"));
+                if !lo.is_finite() || !hi.is_finite() {
+                    return Err(Error::new(
+                        ErrorKind::NonFinite {
+                            field: "TFEA reference range",
+                        },
+                        at + 16,
+                    ));
+                }
+                reference = Some((lo, hi));
+            } else {
+                for _ in 0..channels {
+                    let lo = r.finite_f32("TFEA range lo")?;
+                    let hi = r.finite_f32("TFEA range hi")?;
+                    ranges.push((lo, hi));
+                }
             }
             let count = r.u32("TFEA packet count")? as usize;
             // Every packet needs at least its 4-byte length: bounds the loop by the bytes present.
@@ -311,6 +358,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             Ok(TfeaBody::Hevc {
                 tiling,
                 ranges,
+                reference,
                 packets,
             })
         }

@@ -4,7 +4,11 @@
 //! Linking this crate links FFmpeg and libx265, which are GPL: binaries that include it are
 //! GPL-covered (see the README).
 
+mod demux;
+
 use std::sync::Once;
+
+pub use demux::{demux_hevc, HevcTrack};
 
 use ff::format::Pixel;
 use ffmpeg_next as ff;

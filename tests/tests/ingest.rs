@@ -1,0 +1,337 @@
+//! Ingest of the reference implementation's trained outputs (issue 9), on the committed fixture
+//! `tests/fixtures/reference_run` built by `scripts/reference_fixture.py` with the reference's
+//! own libraries (torch.save, imagecodecs JPEG XL, torchac, the ffmpeg CLI). Its content is
+//! SYNTHETIC on a REAL scene (fruit drops, real labels): no trained DLGStream model exists here.
+//! `reference_decode/gop{g}.safetensors` holds what the reference's decoder computes from the
+//! files; every tensor we read must equal it (bit for bit where the reference is lossless).
+
+use std::path::{Path, PathBuf};
+
+use dlgs::Gaussians;
+use dlgs_decoder::Decoder;
+use dlgs_encoder::EncoderConfig;
+use dlgs_ingest::run::{self, RefGop};
+use dlgs_ingest::{convert, IngestError};
+use dlgs_render::camera::{orbit_cameras, OrbitSpec};
+use dlgs_render::{metrics, render, RenderOptions};
+use safetensors::SafeTensors;
+
+fn fixture() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/reference_run")
+}
+
+fn gop_dirs() -> Vec<PathBuf> {
+    run::resolve(&[fixture()]).unwrap()
+}
+
+fn read_all() -> Vec<RefGop> {
+    run::read_run(&gop_dirs(), |_| {}).unwrap()
+}
+
+struct Reference(Vec<u8>);
+
+impl Reference {
+    fn load(g: usize) -> Self {
+        Reference(
+            std::fs::read(fixture().join(format!("reference_decode/gop{g}.safetensors"))).unwrap(),
+        )
+    }
+    fn get(&self, name: &str) -> Vec<f32> {
+        let st = SafeTensors::deserialize(&self.0).unwrap();
+        let t = st
+            .tensor(name)
+            .unwrap_or_else(|_| panic!("no tensor {name}"));
+        t.data()
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect()
+    }
+}
+
+/// Our tensors in the reference's layout, by the reference's names.
+fn tensor(g: &Gaussians, name: &str) -> Vec<f32> {
+    let n = g.len();
+    let c = g.coeffs();
+    match name {
+        "xyz" => g.positions.iter().flatten().copied().collect(),
+        "scaling" => g.log_scales.iter().flatten().copied().collect(),
+        "rotation" => g.rotations.iter().flatten().copied().collect(),
+        "opacity" => (0..n)
+            .flat_map(|i| [g.opacity[i], g.lang_opacity[i]])
+            .collect(),
+        "features_dc" => (0..n)
+            .flat_map(|i| g.sh[i * 3 * c..i * 3 * c + 3].to_vec())
+            .collect(),
+        "features_rest" => (0..n)
+            .flat_map(|i| g.sh[i * 3 * c + 3..(i + 1) * 3 * c].to_vec())
+            .collect(),
+        "language_feature" => g.lang.clone(),
+        _ => unreachable!(),
+    }
+}
+
+const ATTRS: [&str; 7] = [
+    "xyz",
+    "features_dc",
+    "features_rest",
+    "scaling",
+    "rotation",
+    "opacity",
+    "language_feature",
+];
+
+/// Largest absolute difference and the count of values that differ in any bit.
+fn compare(a: &[f32], b: &[f32]) -> (f32, usize) {
+    assert_eq!(a.len(), b.len());
+    let max = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max);
+    let diff = a
+        .iter()
+        .zip(b)
+        .filter(|(x, y)| x.to_bits() != y.to_bits())
+        .count();
+    (max, diff)
+}
+
+#[test]
+fn every_tensor_equals_the_reference_decoder() {
+    let gops = read_all();
+    assert_eq!(gops.len(), 2);
+    for (g, gop) in gops.iter().enumerate() {
+        let r = Reference::load(g);
+        for (set, suffix) in [(&gop.statics, ""), (&gop.dynamics, "_dynamic")] {
+            for a in ATTRS {
+                let name = format!("_{a}{suffix}");
+                let (max, diff) = compare(&tensor(set, a), &r.get(&name));
+                println!("GOP {g} {name:28} max |diff| {max:.3e}, {diff} values differ");
+                // Lossless in the reference: bit for bit. SH DC is the reference's lossy JPEG XL
+                // (level 100), decoded by jxl-oxide instead of libjxl; GOP 1's latent
+                // residuals are a float32 matmul whose summation order PyTorch does not fix.
+                let lossy = a == "features_dc" || (g > 0 && a != "xyz");
+                if lossy {
+                    // Measured: 1.6e-5 (SH DC, values within +-2.3), latent residuals below.
+                    assert!(max <= 1e-4, "GOP {g} {name}: {max}");
+                } else {
+                    assert_eq!(diff, 0, "GOP {g} {name}: {diff} values differ (max {max})");
+                }
+            }
+        }
+        let (max, diff) = compare(&gop.features.data, &r.get("_point_feats"));
+        println!("GOP {g} _point_feats max |diff| {max:.3e}, {diff} values differ");
+        assert_eq!(diff, 0, "time features must decode bit for bit");
+        for m in gop.mlps.iter() {
+            let name = match m.role.name() {
+                "lang" => "mlp_lang".to_string(),
+                r => format!("mlp_{r}"),
+            };
+            for (l, key) in m.layers.iter().zip(["0.weight", "2.weight"]) {
+                assert_eq!(l.weights, r.get(&format!("{name}.{key}")), "{name}.{key}");
+            }
+        }
+        assert_eq!(
+            gop.mlps.scale_offsets,
+            g > 0,
+            "mlp_cov scales apply from GOP 1 on"
+        );
+    }
+}
+
+fn encode_default(gops: &[RefGop]) -> Vec<u8> {
+    convert::encode(gops, 30, EncoderConfig::default(), Vec::new(), |_| {}).unwrap()
+}
+
+#[test]
+fn dlgs_decodes_to_the_ingested_model_bit_for_bit() {
+    let gops = read_all();
+    let bytes = encode_default(&gops);
+    let mut dec =
+        Decoder::new(std::io::Cursor::new(bytes.clone()), dlgs::Limits::default()).unwrap();
+    for (g, gop) in gops.iter().enumerate() {
+        let d = dec.gop(g as u32).unwrap();
+        assert_eq!(d.canonical.statics, gop.statics, "GOP {g} statics");
+        assert_eq!(d.canonical.dynamics, gop.dynamics, "GOP {g} dynamics");
+        let dy = d.dynamic().unwrap();
+        assert_eq!(dy.features, gop.features, "GOP {g} features");
+        assert_eq!(dy.mlps, gop.mlps, "GOP {g} decoders");
+    }
+    let report = convert::byte_report(&gops, &bytes).unwrap();
+    for (g, r) in report.iter().enumerate() {
+        println!(
+            "GOP {g}: reference {} B counted, {} B with mlp_lang.pth; .dlgs {:.0} B ({:.1} % / {:.1} %)",
+            r.reference_counted,
+            r.reference_with_lang_mlp,
+            r.dlgs,
+            100.0 * r.dlgs / r.reference_counted as f64,
+            100.0 * r.dlgs / r.reference_with_lang_mlp as f64
+        );
+    }
+    let ours: f64 = report.iter().map(|r| r.dlgs).sum();
+    let theirs: u64 = report.iter().map(|r| r.reference_with_lang_mlp).sum();
+    // Reported, not asserted: the 70 % goal of issue 9 is not met yet (see BENCHMARKS.md).
+    println!(
+        "total: .dlgs {ours:.0} B vs reference {theirs} B incl. mlp_lang ({:.1} %)",
+        100.0 * ours / theirs as f64
+    );
+    assert!(report
+        .iter()
+        .all(|r| r.dlgs > 0.0 && r.reference_counted > 0));
+}
+
+/// The reference's decoded model as Gaussians (from its safetensors), for rendering.
+fn reference_gaussians(g: usize, like: &Gaussians, suffix: &str) -> Gaussians {
+    let r = Reference::load(g);
+    let mut out = like.clone();
+    let get = |a: &str| r.get(&format!("_{a}{suffix}"));
+    let (xyz, sc, rot, op, dc, rest, lang) = (
+        get("xyz"),
+        get("scaling"),
+        get("rotation"),
+        get("opacity"),
+        get("features_dc"),
+        get("features_rest"),
+        get("language_feature"),
+    );
+    let c = like.coeffs();
+    for i in 0..like.len() {
+        out.positions[i] = [xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]];
+        out.log_scales[i] = [sc[3 * i], sc[3 * i + 1], sc[3 * i + 2]];
+        out.rotations[i] = [rot[4 * i], rot[4 * i + 1], rot[4 * i + 2], rot[4 * i + 3]];
+        out.opacity[i] = op[2 * i];
+        out.lang_opacity[i] = op[2 * i + 1];
+        out.sh[i * 3 * c..i * 3 * c + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
+        out.sh[i * 3 * c + 3..(i + 1) * 3 * c]
+            .copy_from_slice(&rest[3 * (c - 1) * i..3 * (c - 1) * (i + 1)]);
+        out.lang[9 * i..9 * i + 9].copy_from_slice(&lang[9 * i..9 * i + 9]);
+    }
+    out
+}
+
+#[test]
+fn rendered_psnr_against_the_reference_decode_is_at_least_60_db() {
+    let gops = read_all();
+    let bytes = encode_default(&gops);
+    let mut dec = Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    let cams = orbit_cameras(
+        &gops[0].statics,
+        &OrbitSpec {
+            count: 4,
+            width: 320,
+            height: 240,
+            ..Default::default()
+        },
+    );
+    let opts = RenderOptions::default();
+    for g in 0..gops.len() {
+        let statics = reference_gaussians(g, &gops[g].statics, "");
+        let dynamics = reference_gaussians(g, &gops[g].dynamics, "_dynamic");
+        let mut reference = statics.clone();
+        reference.extend(&dynamics);
+        // Canonical frame (key 0): compare the canonical states; the deformation itself is
+        // the decoder's (checked against an f64 implementation by tests/tests/dynamic.rs).
+        let ours = dec.gop(g as u32).unwrap().canonical.merged();
+        for cam in &cams {
+            let a = render(&ours, cam, &opts).unwrap();
+            let b = render(&reference, cam, &opts).unwrap();
+            let p = metrics::psnr(&a.color, &b.color);
+            println!("GOP {g}: canonical PSNR vs the reference decode {p:.2} dB");
+            assert!(p >= 60.0, "GOP {g}: {p} dB");
+        }
+    }
+}
+
+fn copy_fixture() -> (tempfile::TempDir, Vec<PathBuf>) {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut dirs = Vec::new();
+    for (g, d) in gop_dirs().iter().enumerate() {
+        let to = tmp.path().join(format!("gop{g}"));
+        std::fs::create_dir_all(&to).unwrap();
+        for e in std::fs::read_dir(d).unwrap() {
+            let e = e.unwrap();
+            if e.file_name() != "model.pth" {
+                std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+            }
+        }
+        dirs.push(to);
+    }
+    (tmp, dirs)
+}
+
+fn read_error(dirs: &[PathBuf]) -> String {
+    match run::read_run(dirs, |_| {}) {
+        Ok(_) => panic!("expected an error"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn damaged_runs_give_clear_errors() {
+    let (_tmp, dirs) = copy_fixture();
+    let (g0, g1) = (&dirs[0], &dirs[1]);
+    let restore = |p: &Path, bytes: &[u8]| std::fs::write(p, bytes).unwrap();
+
+    // Missing file.
+    let p = g0.join("_rotation.jxl");
+    let saved = std::fs::read(&p).unwrap();
+    std::fs::remove_file(&p).unwrap();
+    let e = read_error(&dirs);
+    assert!(e.contains("_rotation.jxl") && e.contains("missing"), "{e}");
+    restore(&p, &saved);
+
+    // Truncated video.
+    let p = g0.join("_point_feats.mp4");
+    let saved = std::fs::read(&p).unwrap();
+    restore(&p, &saved[..saved.len() / 2]);
+    let e = read_error(&dirs);
+    assert!(e.contains("_point_feats.mp4"), "{e}");
+    restore(&p, &saved);
+
+    // Truncated / damaged latents.
+    let p = g1.join("offset_compressed.pkl");
+    let saved = std::fs::read(&p).unwrap();
+    for cut in [0, 10, saved.len() / 3, saved.len() - 1] {
+        restore(&p, &saved[..cut]);
+        let e = read_error(&dirs);
+        assert!(e.contains("offset_compressed.pkl"), "{e}");
+    }
+    restore(&p, &saved);
+
+    // Wrong shape: the static positions of GOP 1 come from the dynamic image.
+    let p = g1.join("_xyz_offset.jxl");
+    let saved = std::fs::read(&p).unwrap();
+    std::fs::copy(g1.join("_xyz_dynamic_offset.jxl"), &p).unwrap();
+    let e = read_error(&dirs);
+    assert!(e.contains("positions") || e.contains("shape"), "{e}");
+    restore(&p, &saved);
+
+    // Wrong shape in a decoder.
+    let p = g0.join("mlp_cov.pth");
+    let saved = std::fs::read(&p).unwrap();
+    std::fs::copy(g0.join("mlp_lang.pth"), &p).unwrap();
+    let gops = run::read_run(&dirs, |_| {}).unwrap();
+    let e = convert::encode(&gops, 30, EncoderConfig::default(), Vec::new(), |_| {}).unwrap_err();
+    assert!(e.to_string().contains("cov"), "{e}");
+    restore(&p, &saved);
+
+    // Non-square grid: a CSV range pointing at an image of another attribute's width.
+    let p = g0.join("compression_info.csv");
+    let saved = std::fs::read_to_string(&p).unwrap();
+    restore(&p, saved.replace("_xyz.jxl", "_xyz_dynamic.jxl").as_bytes());
+    let e = read_error(&dirs);
+    assert!(!e.is_empty());
+    restore(&p, saved.as_bytes());
+
+    // NaN in a range: the CSV's min.
+    let bad = saved.replacen("_opacity,-", "_opacity,nan,", 1);
+    let bad = bad.replacen("nan,6", "nan,", 1);
+    restore(&p, bad.as_bytes());
+    let e = read_error(&dirs);
+    assert!(e.contains("compression_info.csv"), "{e}");
+    restore(&p, saved.as_bytes());
+
+    // Not a run at all.
+    let e = run::resolve(&[g0.join("nope")]).unwrap_err();
+    assert!(matches!(e, IngestError::Missing { .. }), "{e}");
+}
