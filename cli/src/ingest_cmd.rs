@@ -21,11 +21,9 @@ pub fn run_ingest(inputs: &[PathBuf], output: &Path, codec: &CodecArgs, fps: u32
         "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
         "settings": settings,
     });
-    let mut cfg = codec.config(meta)?;
-    // The reference's feature video is passed through unless exact features are asked for.
-    if !codec.exact_features {
-        cfg.features = dlgs_encoder::FeatureCodec::Hevc(Default::default());
-    }
+    // The reference's feature video is passed through unless exact features are asked for
+    // (`convert::encode` decides from `cfg.features`).
+    let cfg = codec.config(meta)?;
     let pb = bar(gops.len() as u64, "encoding");
     let bytes = convert::encode(&gops, fps, cfg, Vec::new(), |g| {
         pb.set_position(g as u64 + 1)

@@ -25,7 +25,7 @@ pub struct LatentResidual {
 }
 
 /// Symbols one file may declare (bounds the decode loop and the output).
-const MAX_SYMBOLS: u64 = 1 << 28;
+const MAX_SYMBOLS: u64 = 1 << 26;
 
 /// torchac's integer CDF from its float CDF: `rint(cdf * (2^16 - (Lp-1))) + s` as u16.
 pub fn integer_cdf(cdf: &[f32]) -> Vec<u16> {
@@ -367,8 +367,12 @@ pub fn read(bytes: &[u8], what: &str) -> Result<Vec<LatentResidual>, IngestError
             Ok(v)
         };
         let feature_dim = feature_dim as usize;
+        let div = tensor("div", &[latent_dim])?;
+        if div.contains(&0.0) {
+            return Err(IngestError::format(&w, "a latent divisor (div) is 0"));
+        }
         out.push(LatentResidual {
-            div: tensor("div", &[latent_dim])?,
+            div,
             scale: tensor("layers.0.scale", &[latent_dim, feature_dim])?,
             shift: tensor("layers.0.shift", &[1, feature_dim])?,
             name,

@@ -542,10 +542,13 @@ impl Pickle {
 mod tests {
     use super::*;
 
+    /// `pickle.dumps({'a': [1, 2], 'b': <the same list>}, protocol=2)`.
+    const DICT_WITH_MEMO: &[u8] =
+        b"\x80\x02}q\x00(X\x01\x00\x00\x00aq\x01]q\x02(K\x01K\x02eX\x01\x00\x00\x00bq\x03h\x02u.";
+
     #[test]
     fn protocol_2_dict_with_memo() {
-        // pickle.dumps({'a': [1, 2], 'b': 'a'}, protocol=2) with the list memoised and reused.
-        let data = b"\x80\x02}q\x00(X\x01\x00\x00\x00aq\x01]q\x02(K\x01K\x02eX\x01\x00\x00\x00bq\x03h\x02u.";
+        let data = DICT_WITH_MEMO;
         let p = parse(data).unwrap();
         let a = p.dict_get(p.root, "a").unwrap();
         assert_eq!(p.items(a).unwrap().len(), 2);
@@ -575,7 +578,7 @@ mod tests {
 
     #[test]
     fn every_truncation_is_an_error() {
-        let data = b"\x80\x02}q\x00(X\x01\x00\x00\x00aq\x01]q\x02(K\x01K\x02eX\x01\x00\x00\x00bq\x03h\x02u.";
+        let data = DICT_WITH_MEMO;
         for n in 0..data.len() {
             assert!(parse(&data[..n]).is_err(), "prefix {n}");
         }

@@ -104,6 +104,9 @@ impl Tensor {
     }
 }
 
+/// Largest archive entry read (far above the reference's checkpoints).
+const MAX_ENTRY: u64 = 1 << 32;
+
 /// Resolves a tensor's storage argument to its element type and bytes.
 type StorageOf<'a, 's> = &'a dyn Fn(Id) -> Result<(DType, Cow<'s, [u8]>), String>;
 
@@ -143,6 +146,11 @@ fn rebuild<'s>(p: &Pickle, call_args: Id, storage_of: StorageOf<'_, 's>) -> Resu
         .iter()
         .try_fold(1usize, |a, &s| a.checked_mul(s as usize))
         .ok_or("tensor size overflows")?;
+    // A saved tensor never has more elements than its storage: this bounds the allocation
+    // and the copy loop by the bytes present (a stride-0 view could claim any size).
+    if numel > elems {
+        return Err(format!("{numel} elements in a {elems}-element storage"));
+    }
     // Largest element index the view touches must lie inside the storage.
     if numel > 0 {
         let last = size
@@ -291,9 +299,10 @@ fn read_entry<R: Read + Seek>(
     let mut f = zip
         .by_name(name)
         .map_err(|e| format!("archive entry {name}: {e}"))?;
-    // The central directory's size bounds the allocation; a lying size fails the read below.
-    out.reserve(f.size().min(1 << 30) as usize);
-    f.read_to_end(out)
+    // Grows with the bytes actually read (a declared size is not trusted), capped.
+    (&mut f)
+        .take(MAX_ENTRY)
+        .read_to_end(out)
         .map_err(|e| format!("archive entry {name}: {e}"))?;
     Ok(())
 }
