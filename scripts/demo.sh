@@ -73,6 +73,6 @@ echo "== RD sweep of the time features (crf) x canonical quality on the dynamic 
 $B rd "$OUT/dynamic_exact.dlgs" --crf 6,18 --quality lossless,high --times 2 --orbit 2 --width 676 --height 507 -o "$OUT/rd"
 echo "== ingest: a model in the reference implementation's exact output layout (fixture: SYNTHETIC content on a real scene)"
 $B encode tests/fixtures/reference_run -o "$OUT/reference_run.dlgs"
-$B encode tests/fixtures/reference_run -o "$OUT/reference_run_high.dlgs" --quality high | tail -1
-$B compare "$OUT/reference_run.dlgs" "$OUT/reference_run_high.dlgs" --t 2.5 --orbit 4 --width 480 --height 360 | tail -1
+$B encode tests/fixtures/reference_run -o "$OUT/reference_run_nl.dlgs" --quality near-lossless | tail -1
+$B compare "$OUT/reference_run.dlgs" "$OUT/reference_run_nl.dlgs" --t 2.5 --orbit 4 --width 480 --height 360 | tail -1
 echo "outputs in $OUT/"

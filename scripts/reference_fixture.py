@@ -15,7 +15,9 @@ not PLAS (the order only changes compression, not the format).
 Also writes `reference_decode/gop{g}.safetensors`: the tensors the reference's test-time decoder
 (test_fdsd.py: decompress_attr_3, load_compressed_offset, get_*_ori) produces from these files,
 computed with the same libraries (NumPy 1.x, which that code needs: it calls
-`ndarray.newbyteorder`), for the Rust tests to compare against.
+`ndarray.newbyteorder`), for the Rust tests to compare against; and
+`reference_decode/gop{g}_checkpoint.safetensors`: what `torch.load` reads from GOP 0's
+`model.pth` and GOP 1's `model_offset.pth` (the values a checkpoint-only run must give).
 
 Run by hand (CI does not): needs torch, numpy<2, imagecodecs, pandas, torchac (+ ninja, a C++
 compiler), safetensors and the ffmpeg CLI with libx265.
@@ -438,6 +440,34 @@ def main(root):
                       ("_point_feats", torch.tensor(feats1)), ("offset_mode", 22)])
     torch.save(sd, os.path.join(out1, "model.pth"))
     dec1 = decode_gop1(out1, dec0)
+    # model_offset.pth as GaussianModel.save() writes it (offset_mode 22): the state dict (base
+    # attributes = the decoded GOP 0, new features, MLPs), then every attribute accumulated
+    # under `_<attr>[_dynamic]_offset` (get_*_ori: base + latent decoder output; the latents
+    # are rounded in the decoder, so these equal the decoded values) and the absolute refined
+    # positions as trained (before their JPEG XL normalisation).
+    sd = OrderedDict()
+    for base in SHAPES:
+        for suffix in ("", "_dynamic"):
+            sd[f"_{base}{suffix}"] = dec0[f"_{base}{suffix}"].clone()
+    sd["_point_feats"] = torch.tensor(feats1)
+    for name, m in mlps1.items():
+        for k, v in m.state_dict().items():
+            sd[f"{name}.{k}"] = v
+    sd["_xyz_dynamic_offset"] = torch.tensor(xyz_d)
+    sd["_xyz_offset"] = torch.tensor(xyz_s)
+    for base in SHAPES:
+        if base != "xyz":
+            for suffix in ("_dynamic", ""):
+                sd[f"_{base}{suffix}_offset"] = dec1[f"_{base}{suffix}"].clone()
+    sd["offset_mode"] = 22
+    torch.save(sd, os.path.join(out1, "model_offset.pth"))
+    # What torch.load reads from the checkpoints: the expected values of a checkpoint-only run.
+    for g, (d, f) in enumerate(((out0, "model.pth"), (out1, "model_offset.pth"))):
+        ck = torch.load(os.path.join(d, f), weights_only=True)
+        # (GOP 1: only what a reader takes from model_offset.pth, not the base attributes)
+        keep = lambda k: g == 0 or k.endswith("_offset") or k.startswith("mlp_") or k == "_point_feats"
+        save_file({k: v.contiguous() for k, v in ck.items() if torch.is_tensor(v) and keep(k)},
+                  os.path.join(dec_dir, f"gop{g}_checkpoint.safetensors"))
     for name, m in mlps1.items():
         for k, v in m.state_dict().items():
             dec1[f"{name}.{k}"] = v.contiguous()

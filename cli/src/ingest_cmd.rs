@@ -58,18 +58,34 @@ pub fn run_ingest(inputs: &[PathBuf], output: &Path, codec: &CodecArgs, fps: u32
             r.dlgs / frames,
         );
         (a, b, c) = (a + x, b + y, c + z);
-        println!(
-            "  {g:3}   {x:19.1}   {y:24.1}   {z:8.1}   {:7.1} %",
-            100.0 * z / y
-        );
+        if y > 0.0 {
+            println!(
+                "  {g:3}   {x:19.1}   {y:24.1}   {z:8.1}   {:7.1} %",
+                100.0 * z / y
+            );
+        } else {
+            println!(
+                "  {g:3}   {:>19}   {:>24}   {z:8.1}   (read from its checkpoint)",
+                "-", "-"
+            );
+        }
     }
     let n = report.len() as f64;
-    println!(
-        "  mean  {:19.1}   {:24.1}   {:8.1}   {:7.1} %",
-        a / n,
-        b / n,
-        c / n,
-        100.0 * c / b
-    );
+    if report.iter().all(|r| r.reference_with_lang_mlp > 0) {
+        println!(
+            "  mean  {:19.1}   {:24.1}   {:8.1}   {:7.1} %",
+            a / n,
+            b / n,
+            c / n,
+            100.0 * c / b
+        );
+    } else {
+        println!(
+            "  mean  {:>19}   {:>24}   {:8.1}   (no comparison: some GOPs have no compressed files)",
+            "-",
+            "-",
+            c / n
+        );
+    }
     Ok(())
 }

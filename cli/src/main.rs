@@ -47,6 +47,8 @@ enum Cmd {
     /// trained with the DLGStream reference implementation: give its GOP output folders (each
     /// `gop<g>_<postfix>` or its `compression/best/jxl_quant`, in GOP order) or the scene
     /// folder holding them. Lossless by default (decodes to the reference decoder's tensors).
+    /// A GOP folder without `compression_info.csv` is read from its checkpoint (`model.pth`,
+    /// GOP >= 1 `model_offset.pth`); where both exist the compressed files win.
     Encode {
         #[arg(required = true, num_args = 1..)]
         input: Vec<PathBuf>,

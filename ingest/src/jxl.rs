@@ -16,13 +16,17 @@ pub struct JxlArray {
     pub data: Vec<f32>,
 }
 
-/// Largest picture accepted (samples per frame): far above the reference's 200k-Gaussian
-/// grids, far below what exhausts memory.
+/// Largest array accepted (samples over all frames and channels, 1 GiB of f32): far above the
+/// reference's 200k-Gaussian grids, far below what exhausts memory.
 const MAX_SAMPLES: u64 = 1 << 28;
+/// What the decoder itself may allocate (its tracker refuses beyond): a few copies of the
+/// largest accepted array, so a small hostile file cannot declare its way to any size.
+const MAX_DECODER_BYTES: usize = 1 << 31;
 
 pub fn decode(bytes: &[u8], what: &str) -> Result<JxlArray, IngestError> {
     let err = |r: String| IngestError::format(what, r);
     let image = jxl_oxide::JxlImage::builder()
+        .alloc_tracker(jxl_oxide::AllocTracker::with_limit(MAX_DECODER_BYTES))
         .read(bytes)
         .map_err(|e| err(format!("JPEG XL: {e}")))?;
     let (w, h) = (image.width() as usize, image.height() as usize);
@@ -42,6 +46,12 @@ pub fn decode(bytes: &[u8], what: &str) -> Result<JxlArray, IngestError> {
         let planes = render.image_planar();
         if k == 0 {
             channels = planes.len();
+            let total = (frames as u64) * (w as u64) * (h as u64) * (channels as u64);
+            if total > MAX_SAMPLES {
+                return Err(err(format!(
+                    "{frames} frame(s) of {w}x{h}x{channels} is larger than the limit"
+                )));
+            }
             data.reserve(frames * w * h * channels);
         } else if planes.len() != channels {
             return Err(err("frames with different channel counts".into()));

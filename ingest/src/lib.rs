@@ -1,10 +1,12 @@
 //! Ingest of the DLGStream reference implementation's trained outputs (its "fdsd" / 3DGS
 //! variant): the per-GOP `jxl_quant` folders with JPEG XL attribute images, the 12-bit HEVC
 //! time-feature video, `compression_info.csv`, the `mlp_*.pth` decoders and, from GOP 1 on,
-//! `offset_compressed.pkl` (torchac-coded latent residuals); or the `model.pth` checkpoint.
+//! `offset_compressed.pkl` (torchac-coded latent residuals); or, for GOP folders without them,
+//! the `model.pth` / `model_offset.pth` checkpoints ([`checkpoint`]).
 //! [`run::read_run`] turns them into the tensors the reference's decoder produces, and
 //! [`convert`] into a `.dlgs` stream that decodes to the same model.
 
+pub mod checkpoint;
 pub mod convert;
 pub mod csv;
 pub mod jxl;

@@ -14,7 +14,7 @@ use dlgs::Gaussians;
 use crate::csv::{self, Row};
 use crate::latents::{self, LatentResidual};
 use crate::torch::{self, Tensor};
-use crate::{check_finite, jxl, IngestError};
+use crate::{check_finite, checkpoint, jxl, IngestError};
 
 /// Keys per GOP and channels, fixed by the reference (`time_line 60 / interval 10 + 1`, 16).
 pub const KEYS: usize = 7;
@@ -72,7 +72,10 @@ pub fn resolve(paths: &[PathBuf]) -> Result<Vec<PathBuf>, IngestError> {
                 what: "a reference output folder".into(),
             });
         }
-        if p.join("compression_info.csv").is_file() || p.join("model.pth").is_file() {
+        if has_compressed(p)
+            || p.join("model.pth").is_file()
+            || p.join(checkpoint::OFFSET_CHECKPOINT).is_file()
+        {
             out.push(p.clone());
             continue;
         }
@@ -106,7 +109,12 @@ pub fn resolve(paths: &[PathBuf]) -> Result<Vec<PathBuf>, IngestError> {
     Ok(out)
 }
 
-fn read(path: &Path, what: &str) -> Result<Vec<u8>, IngestError> {
+/// Whether a GOP folder holds the reference's compressed files (else its checkpoints are read).
+pub fn has_compressed(dir: &Path) -> bool {
+    dir.join("compression_info.csv").is_file()
+}
+
+pub(crate) fn read(path: &Path, what: &str) -> Result<Vec<u8>, IngestError> {
     std::fs::read(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => IngestError::Missing {
             path: path.to_path_buf(),
@@ -185,24 +193,24 @@ fn attribute(
 }
 
 /// Attribute tensors of one set (static or dynamic), reference layout.
-struct SetTensors {
-    xyz: Vec<f32>,
-    dc: Vec<f32>,
-    rest: Vec<f32>,
-    scaling: Vec<f32>,
-    rotation: Vec<f32>,
-    opacity: Vec<f32>,
-    opacity_dim: usize,
-    lang: Option<Vec<f32>>,
-    rest_channels: usize,
+pub(crate) struct SetTensors {
+    pub(crate) xyz: Vec<f32>,
+    pub(crate) dc: Vec<f32>,
+    pub(crate) rest: Vec<f32>,
+    pub(crate) scaling: Vec<f32>,
+    pub(crate) rotation: Vec<f32>,
+    pub(crate) opacity: Vec<f32>,
+    pub(crate) opacity_dim: usize,
+    pub(crate) lang: Option<Vec<f32>>,
+    pub(crate) rest_channels: usize,
 }
 
 impl SetTensors {
-    fn count(&self) -> usize {
+    pub(crate) fn count(&self) -> usize {
         self.xyz.len() / 3
     }
 
-    fn gaussians(&self, what: &str) -> Result<Gaussians, IngestError> {
+    pub(crate) fn gaussians(&self, what: &str) -> Result<Gaussians, IngestError> {
         let n = self.count();
         let degree = match self.rest_channels {
             0 => 0,
@@ -370,9 +378,19 @@ fn read_mlp(dir: &Path, file: &str, role: MlpRole) -> Result<Mlp, IngestError> {
     let what = path.display().to_string();
     let bytes = read(&path, "a deformation decoder")?;
     let tensors = torch::read_zip_state_dict(std::io::Cursor::new(bytes), &what)?;
+    mlp_from_state(tensors.iter().map(|(k, t)| (k.as_str(), t)), role, &what)
+}
+
+/// An MLP from its `state_dict` entries (`<i>.weight` keys, prefix already stripped).
+pub(crate) fn mlp_from_state<'t>(
+    tensors: impl Iterator<Item = (&'t str, &'t Tensor)>,
+    role: MlpRole,
+    what: &str,
+) -> Result<Mlp, IngestError> {
+    let what = what.to_string();
     let mut layers = Vec::new();
     let mut weights: Vec<(usize, &Tensor)> = Vec::new();
-    for (k, t) in &tensors {
+    for (k, t) in tensors {
         if k.ends_with(".bias") {
             return Err(IngestError::shape(
                 &what,
@@ -427,7 +445,7 @@ fn read_mlps(dir: &Path, language: bool, scale_offsets: bool) -> Result<DeformMl
 /// The files the reference counts per GOP (`test_fdsd.py:test_all`): the mp4, the attribute
 /// images (GOP 0) or re-sent positions and latents (GOP >= 1), four MLPs, the CSV; and the
 /// files it does not count but a decoder needs (`mlp_lang.pth`).
-fn list_files(dir: &Path, first: bool, language: bool) -> Vec<RunFile> {
+pub(crate) fn list_files(dir: &Path, first: bool, language: bool) -> Vec<RunFile> {
     let mut names: Vec<(String, bool)> = vec![("_point_feats.mp4".into(), true)];
     if first {
         for a in [
@@ -645,9 +663,13 @@ pub fn read_run(
 ) -> Result<Vec<RefGop>, IngestError> {
     let mut gops: Vec<RefGop> = Vec::with_capacity(dirs.len());
     for (g, d) in dirs.iter().enumerate() {
-        let gop = match gops.last() {
-            None => read_first(d)?,
-            Some(prev) => read_next(d, prev)?,
+        // The compressed files win where both exist: they are what the reference's own
+        // player decodes; the checkpoints hold the values before compression.
+        let gop = match (gops.last(), has_compressed(d)) {
+            (None, true) => read_first(d)?,
+            (None, false) => checkpoint::read_first(d)?,
+            (Some(prev), true) => read_next(d, prev)?,
+            (Some(prev), false) => checkpoint::read_next(d, prev)?,
         };
         gops.push(gop);
         progress(g);

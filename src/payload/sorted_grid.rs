@@ -27,6 +27,17 @@ pub struct QuantBits {
 }
 
 impl QuantBits {
+    /// Renders within ~65 dB of the unquantised model (measured on the reference-run fixture,
+    /// BENCHMARKS.md "Ingest"): for re-packing trained models at a fraction of their bytes.
+    pub const NEAR_LOSSLESS: QuantBits = QuantBits {
+        position: 16,
+        log_scale: 11,
+        rotation: 12,
+        opacity: 11,
+        sh_dc: 11,
+        sh_rest: 9,
+        lang: 11,
+    };
     pub const HIGH: QuantBits = QuantBits {
         position: 14,
         log_scale: 8,
@@ -56,6 +67,7 @@ impl QuantBits {
     };
     pub fn preset(name: &str) -> Option<QuantBits> {
         match name {
+            "near-lossless" => Some(Self::NEAR_LOSSLESS),
             "high" => Some(Self::HIGH),
             "medium" => Some(Self::MEDIUM),
             "low" => Some(Self::LOW),

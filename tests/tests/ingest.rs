@@ -7,9 +7,11 @@
 
 use std::path::{Path, PathBuf};
 
+use dlgs::payload::mlp_weights::WeightType;
+use dlgs::payload::sorted_grid::QuantBits;
 use dlgs::Gaussians;
-use dlgs_decoder::Decoder;
-use dlgs_encoder::EncoderConfig;
+use dlgs_decoder::{Decoder, FrameOptions};
+use dlgs_encoder::{CanonicalCodec, EncoderConfig, ResidualConfig, SortSpec};
 use dlgs_ingest::run::{self, RefGop};
 use dlgs_ingest::{convert, IngestError};
 use dlgs_render::camera::{orbit_cameras, OrbitSpec};
@@ -170,7 +172,8 @@ fn dlgs_decodes_to_the_ingested_model_bit_for_bit() {
     }
     let ours: f64 = report.iter().map(|r| r.dlgs).sum();
     let theirs: u64 = report.iter().map(|r| r.reference_with_lang_mlp).sum();
-    // Reported, not asserted: the 70 % goal of issue 9 is not met yet (see BENCHMARKS.md).
+    // Reported, not asserted: lossless, the .dlgs is larger than the reference's packing; the
+    // 70 % goal is met by `--quality near-lossless` (the test below).
     println!(
         "total: .dlgs {ours:.0} B vs reference {theirs} B incl. mlp_lang ({:.1} %)",
         100.0 * ours / theirs as f64
@@ -209,20 +212,25 @@ fn reference_gaussians(g: usize, like: &Gaussians, suffix: &str) -> Gaussians {
     out
 }
 
-#[test]
-fn rendered_psnr_against_the_reference_decode_is_at_least_60_db() {
-    let gops = read_all();
-    let bytes = encode_default(&gops);
-    let mut dec = Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
-    let cams = orbit_cameras(
-        &gops[0].statics,
+/// 4 orbit views at 320x240 around the scene.
+fn test_cameras(g: &Gaussians) -> Vec<dlgs_render::camera::Camera> {
+    orbit_cameras(
+        g,
         &OrbitSpec {
             count: 4,
             width: 320,
             height: 240,
             ..Default::default()
         },
-    );
+    )
+}
+
+#[test]
+fn rendered_psnr_against_the_reference_decode_is_at_least_60_db() {
+    let gops = read_all();
+    let bytes = encode_default(&gops);
+    let mut dec = Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    let cams = test_cameras(&gops[0].statics);
     let opts = RenderOptions::default();
     for g in 0..gops.len() {
         let statics = reference_gaussians(g, &gops[g].statics, "");
@@ -334,4 +342,178 @@ fn damaged_runs_give_clear_errors() {
     // Not a run at all.
     let e = run::resolve(&[g0.join("nope")]).unwrap_err();
     assert!(matches!(e, IngestError::Missing { .. }), "{e}");
+}
+
+/// A run with only the checkpoints (GOP 0 `model.pth`, GOP 1 `model.pth` + `model_offset.pth`).
+fn checkpoint_only_run() -> (tempfile::TempDir, Vec<PathBuf>) {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut dirs = Vec::new();
+    for (g, d) in gop_dirs().iter().enumerate() {
+        let to = tmp
+            .path()
+            .join(format!("gop{g}_ckpt/compression/best/jxl_quant"));
+        std::fs::create_dir_all(&to).unwrap();
+        for f in ["model.pth", "model_offset.pth"] {
+            if d.join(f).is_file() {
+                std::fs::copy(d.join(f), to.join(f)).unwrap();
+            }
+        }
+        dirs.push(to);
+    }
+    (tmp, dirs)
+}
+
+#[test]
+fn a_run_with_only_checkpoints_reads_them_and_compressed_files_win_otherwise() {
+    let (tmp, dirs) = checkpoint_only_run();
+    // The scene folder resolves to the two GOP folders as for a compressed run.
+    assert_eq!(run::resolve(&[tmp.path().to_path_buf()]).unwrap(), dirs);
+    let gops = run::read_run(&dirs, |_| {}).unwrap();
+    let compressed = read_all();
+    for (g, gop) in gops.iter().enumerate() {
+        let r = Reference(
+            std::fs::read(
+                fixture().join(format!("reference_decode/gop{g}_checkpoint.safetensors")),
+            )
+            .unwrap(),
+        );
+        // GOP 0: model.pth's trained values; GOP 1: model_offset.pth's accumulated ones.
+        let key = |a: &str, suffix: &str| match g {
+            0 => format!("_{a}{suffix}"),
+            _ => format!("_{a}{suffix}_offset"),
+        };
+        for (set, suffix) in [(&gop.statics, ""), (&gop.dynamics, "_dynamic")] {
+            for a in ATTRS {
+                let (max, diff) = compare(&tensor(set, a), &r.get(&key(a, suffix)));
+                assert_eq!(diff, 0, "GOP {g} {}: max {max}", key(a, suffix));
+            }
+        }
+        assert_eq!(gop.features.data, r.get("_point_feats"), "GOP {g} features");
+        for m in gop.mlps.iter() {
+            let name = format!("mlp_{}", m.role.name());
+            for (l, k) in m.layers.iter().zip(["0.weight", "2.weight"]) {
+                assert_eq!(l.weights, r.get(&format!("{name}.{k}")), "{name}.{k}");
+            }
+        }
+        assert_eq!(gop.mlps.scale_offsets, g > 0);
+        assert!(
+            gop.files.is_empty(),
+            "checkpoints are not the reference's packing"
+        );
+        // Where both exist the compressed files were read: the checkpoint's SH DC is the
+        // trained value, the compressed run's is the lossy JPEG XL decode.
+        let ck_dc = tensor(&gop.statics, "features_dc");
+        let (max, _) = compare(&ck_dc, &tensor(&compressed[g].statics, "features_dc"));
+        println!("GOP {g}: checkpoint vs compressed SH DC max |diff| {max:.2e}");
+        assert!(
+            max > 0.0,
+            "GOP {g}: the full fixture must have been read from its JXL files"
+        );
+    }
+    // The checkpoint run encodes (features through our own HEVC encoder) and decodes to the
+    // checkpoint's attributes and decoders exactly.
+    let bytes = encode_default(&gops);
+    let mut dec = Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    for (g, gop) in gops.iter().enumerate() {
+        let d = dec.gop(g as u32).unwrap();
+        assert_eq!(d.canonical.statics, gop.statics, "GOP {g} statics");
+        assert_eq!(d.canonical.dynamics, gop.dynamics, "GOP {g} dynamics");
+        let dy = d.dynamic().unwrap();
+        assert_eq!(dy.mlps, gop.mlps, "GOP {g} decoders");
+        // Lossy like the reference's own video (same crf 6): measured against the trained
+        // features, ours vs what the reference's mp4 decodes to.
+        let rms = |a: &[f32], b: &[f32]| {
+            let s: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
+            (s / a.len() as f64).sqrt()
+        };
+        let ours = rms(&dy.features.data, &gop.features.data);
+        let theirs = rms(&compressed[g].features.data, &gop.features.data);
+        let (max, _) = compare(&dy.features.data, &gop.features.data);
+        let (max_ref, _) = compare(&compressed[g].features.data, &gop.features.data);
+        println!(
+            "GOP {g}: time features vs trained: .dlgs rms {ours:.2e} max {max:.2e}; \
+             reference mp4 rms {theirs:.2e} max {max_ref:.2e}"
+        );
+        assert!(
+            ours <= 1.5 * theirs,
+            "GOP {g}: rms {ours} vs the reference's {theirs}"
+        );
+    }
+
+    // Errors name the checkpoint: truncated, and a GOP 1 without model_offset.pth.
+    let p = dirs[1].join("model_offset.pth");
+    let saved = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &saved[..saved.len() / 2]).unwrap();
+    let e = read_error(&dirs);
+    assert!(e.contains("model_offset.pth"), "{e}");
+    std::fs::remove_file(&p).unwrap();
+    let e = read_error(&dirs);
+    assert!(
+        e.contains("model_offset.pth") && e.contains("missing"),
+        "{e}"
+    );
+    // GOP 0's model.pth put in GOP 1's place: no accumulated tensors.
+    std::fs::copy(dirs[0].join("model.pth"), &p).unwrap();
+    let e = read_error(&dirs);
+    assert!(e.contains("_offset"), "{e}");
+}
+
+/// `dlgs encode RUN --quality near-lossless`: sorted grids at the near-lossless bits, decoders
+/// in f16, residual GOPs as lossy as GOP 0 (what `CodecArgs::config` builds for that preset).
+fn near_lossless() -> EncoderConfig {
+    EncoderConfig {
+        canonical: CanonicalCodec::Sorted {
+            bits: QuantBits::NEAR_LOSSLESS,
+            sort: SortSpec { passes: 3 },
+        },
+        mlp_weights: WeightType::F16,
+        residual: ResidualConfig {
+            follow_quantisation: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+#[test]
+fn near_lossless_is_under_70_percent_of_the_reference_and_renders_above_60_db() {
+    let gops = read_all();
+    let lossless = encode_default(&gops);
+    let small = convert::encode(&gops, 30, near_lossless(), Vec::new(), |_| {}).unwrap();
+    let report = convert::byte_report(&gops, &small).unwrap();
+    let ours: f64 = report.iter().map(|r| r.dlgs).sum();
+    let theirs: u64 = report.iter().map(|r| r.reference_with_lang_mlp).sum();
+    let share = ours / theirs as f64;
+    println!(
+        "near-lossless: {ours:.0} B vs the reference's {theirs} B incl. mlp_lang ({:.1} %; \
+         lossless .dlgs {} B)",
+        100.0 * share,
+        lossless.len()
+    );
+    assert!(share <= 0.70, "{:.1} %", 100.0 * share);
+
+    // Whole frames (deformed dynamics included) either side of the GOP boundary and inside
+    // both GOPs, against the lossless file (= the reference decode, see the tests above).
+    let mut a = Decoder::new(std::io::Cursor::new(lossless), dlgs::Limits::default()).unwrap();
+    let mut b = Decoder::new(std::io::Cursor::new(small), dlgs::Limits::default()).unwrap();
+    let cams = test_cameras(&gops[0].statics);
+    let opts = RenderOptions::default();
+    let mut worst = f64::INFINITY;
+    for t in [0.5, 1.95, 2.0, 3.5] {
+        for cam in &cams {
+            let fo = FrameOptions {
+                camera_center: cam.position.to_array(),
+                language: false,
+            };
+            let fa = a.frame_at(t, &fo).unwrap().merged();
+            let fb = b.frame_at(t, &fo).unwrap().merged();
+            let p = metrics::psnr(
+                &render(&fa, cam, &opts).unwrap().color,
+                &render(&fb, cam, &opts).unwrap().color,
+            );
+            worst = worst.min(p);
+        }
+    }
+    println!("near-lossless: worst PSNR vs lossless over 4 times x 4 cameras {worst:.2} dB");
+    assert!(worst >= 60.0, "{worst} dB");
 }
