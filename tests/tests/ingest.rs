@@ -328,7 +328,10 @@ fn damaged_runs_give_clear_errors() {
     let saved = std::fs::read_to_string(&p).unwrap();
     restore(&p, saved.replace("_xyz.jxl", "_xyz_dynamic.jxl").as_bytes());
     let e = read_error(&dirs);
-    assert!(!e.is_empty());
+    assert!(
+        e.contains("wrong shape") && e.contains("576 Gaussians"),
+        "{e}"
+    );
     restore(&p, saved.as_bytes());
 
     // NaN in a range: the CSV's min.
@@ -456,6 +459,31 @@ fn a_run_with_only_checkpoints_reads_them_and_compressed_files_win_otherwise() {
     std::fs::copy(dirs[0].join("model.pth"), &p).unwrap();
     let e = read_error(&dirs);
     assert!(e.contains("_offset"), "{e}");
+
+    // A NaN in a checkpoint tensor: the archive rewritten with every storage's first value NaN.
+    let p = dirs[0].join("model.pth");
+    let mut src = zip::ZipArchive::new(std::fs::File::open(&p).unwrap()).unwrap();
+    let mut out = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let stored =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for i in 0..src.len() {
+        let mut f = src.by_index(i).unwrap();
+        let name = f.name().to_string();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut f, &mut bytes).unwrap();
+        if name.contains("/data/") && bytes.len() >= 4 {
+            bytes[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+        }
+        out.start_file(name, stored).unwrap();
+        std::io::Write::write_all(&mut out, &bytes).unwrap();
+    }
+    std::fs::write(&p, out.finish().unwrap().into_inner()).unwrap();
+    match run::read_run(&dirs, |_| {}) {
+        Err(e @ IngestError::NonFinite { .. }) => {
+            assert!(e.to_string().contains("model.pth"), "{e}")
+        }
+        other => panic!("expected a non-finite error, got {:?}", other.err()),
+    }
 }
 
 /// `dlgs encode RUN --quality near-lossless`: sorted grids at the near-lossless bits, decoders
