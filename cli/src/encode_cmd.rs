@@ -34,9 +34,10 @@ pub struct CodecArgs {
     /// `--quality lossless`).
     #[arg(long)]
     pub bits: Option<String>,
-    /// Grid sort refinement passes per radius: 0 = k-d layout only (fastest), 1 = fast,
-    /// 3 = default; more passes give smoother grids (smaller files) for more encode time.
-    #[arg(long, default_value_t = 3)]
+    /// Grid sort refinement passes per radius (PLAS-style, after the k-d layout). 0 (default)
+    /// = the k-d layout only: fastest and, on every real scene measured, the smallest files;
+    /// refinement smooths colours at the cost of position coherence (BENCHMARKS.md "Grid sort").
+    #[arg(long, default_value_t = 0)]
     pub sort_passes: u32,
     /// Store raw canonical floats without zstd.
     #[arg(long)]

@@ -16,7 +16,7 @@ fn main() {
         ("file order", None),
         ("k-d only", Some(SortSpec::NONE)),
         ("passes 1", Some(SortSpec::FAST)),
-        ("passes 3", Some(SortSpec::DEFAULT)),
+        ("passes 3", Some(SortSpec::REFINED)),
         ("passes 8", Some(SortSpec { passes: 8 })),
     ] {
         let start = Instant::now();

@@ -180,9 +180,21 @@ fn values(g: &Gaussians, k: Kind) -> Vec<f32> {
     }
 }
 
+/// Log-scales more than this below the channel's largest are raised to it before
+/// quantisation: an axis under e^-14 (~1e-6) of the largest Gaussian's is far below a pixel at
+/// any practical resolution, while trained scenes hold collapsed axes near e^-23 that would
+/// otherwise take half the range (format-spec §6.5.2; measured in BENCHMARKS.md).
+pub const LOG_SCALE_SPAN: f32 = 14.0;
+
 /// Quantisation range: fixed for opacities, rotation components and the index; the data's
-/// min/max otherwise.
+/// min/max otherwise (log-scales: at most `LOG_SCALE_SPAN` below their max).
 fn range(k: Kind, v: &[f32]) -> (f32, f32) {
+    let min_max = || {
+        v.iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            })
+    };
     match k {
         Kind::Opacity | Kind::LangOpacity => (0.0, 1.0),
         Kind::Rotation(_) => (
@@ -191,11 +203,11 @@ fn range(k: Kind, v: &[f32]) -> (f32, f32) {
         ),
         Kind::RotIndex => (0.0, 3.0),
         _ if v.is_empty() => (0.0, 0.0),
-        _ => v
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &x| {
-                (lo.min(x), hi.max(x))
-            }),
+        Kind::LogScale(_) => {
+            let (lo, hi) = min_max();
+            (lo.max(hi - LOG_SCALE_SPAN), hi)
+        }
+        _ => min_max(),
     }
 }
 

@@ -6,7 +6,7 @@ use std::io::Cursor;
 
 use dlgs::container::SceneHeader;
 use dlgs::model::{Canonical, Gaussians};
-use dlgs::payload::sorted_grid::{self, dequantise, quantise_set, QuantBits};
+use dlgs::payload::sorted_grid::{self, dequantise, quantise_set, QuantBits, LOG_SCALE_SPAN};
 use dlgs::Limits;
 use dlgs_decoder::Decoder;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
@@ -93,6 +93,36 @@ fn errors_stay_within_half_a_step() {
         assert!(
             worst <= step * 0.5001 + 1e-6,
             "axis {a}: {worst} vs step {step}"
+        );
+    }
+    // Log-scales: within half a step above the floor (at most LOG_SCALE_SPAN below the max;
+    // this tile has collapsed axes near -23), raised to it below.
+    for a in 0..3 {
+        let (b, lo, hi, _) = q.channels[3 + a];
+        assert!(
+            lo >= hi - LOG_SCALE_SPAN - 1e-4,
+            "axis {a}: range {lo}..{hi}"
+        );
+        let step = (hi - lo) / ((1u32 << b) - 1) as f32;
+        let mut raised = 0;
+        for i in 0..g.len() {
+            let (v, dv) = (g.log_scales[i][a], d.log_scales[i][a]);
+            if v < lo {
+                raised += 1;
+                assert!(
+                    (dv - lo).abs() <= step * 0.5001 + 1e-5,
+                    "Gaussian {i}: {dv}"
+                );
+            } else {
+                assert!(
+                    (dv - v).abs() <= step * 0.5001 + 1e-5,
+                    "Gaussian {i}: {dv} vs {v}"
+                );
+            }
+        }
+        assert!(
+            raised > 0,
+            "axis {a}: the tile's collapsed axes should be raised"
         );
     }
     // Rotations: same rotation up to the component step.
@@ -204,7 +234,7 @@ fn payload_does_not_depend_on_thread_count() {
             .build()
             .unwrap()
             .install(|| {
-                let order = grid_order(&g, SortSpec::DEFAULT);
+                let order = grid_order(&g, SortSpec::REFINED);
                 let c = Canonical::from_static(permute(&g, &order));
                 sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap()
             })

@@ -492,7 +492,7 @@ fn near_lossless() -> EncoderConfig {
     EncoderConfig {
         canonical: CanonicalCodec::Sorted {
             bits: QuantBits::NEAR_LOSSLESS,
-            sort: SortSpec { passes: 3 },
+            sort: SortSpec::DEFAULT,
         },
         mlp_weights: WeightType::F16,
         residual: ResidualConfig {
