@@ -110,7 +110,41 @@ impl<'a> RelevanceField<'a> {
     }
 
     /// Relevance of each feature row (`input_dims` values) to each positive: `n x positives`.
+    /// Rows that are exactly +0.0 (pixels no Gaussian covers: most of a typical view) are
+    /// scored once and copied; the others go through the decoder or table. Same values as
+    /// scoring every row (the zero row takes the same path).
     pub fn relevance(&self, features: &[f32]) -> Vec<f32> {
+        let d = self.dec.input_dims().max(1);
+        let k = self.positives;
+        let rows = features.len() / d;
+        let live: Vec<usize> = (0..rows)
+            .filter(|&i| {
+                features[i * d..(i + 1) * d]
+                    .iter()
+                    .any(|v| v.to_bits() != 0)
+            })
+            .collect();
+        if live.len() == rows {
+            return self.scores(features);
+        }
+        // Row 0 of the compacted input is the zero feature.
+        let mut compact = vec![0.0f32; (live.len() + 1) * d];
+        for (j, &i) in live.iter().enumerate() {
+            compact[(j + 1) * d..(j + 2) * d].copy_from_slice(&features[i * d..(i + 1) * d]);
+        }
+        let scored = self.scores(&compact);
+        let mut out = Vec::with_capacity(rows * k);
+        for _ in 0..rows {
+            out.extend_from_slice(&scored[..k]);
+        }
+        for (j, &i) in live.iter().enumerate() {
+            out[i * k..(i + 1) * k].copy_from_slice(&scored[(j + 1) * k..(j + 2) * k]);
+        }
+        out
+    }
+
+    /// Relevance of every row, no shortcut.
+    fn scores(&self, features: &[f32]) -> Vec<f32> {
         let cos = self.cosines(features);
         let t = self.positives + self.negatives;
         let mut out = vec![0.0f32; (cos.len() / t) * self.positives];
@@ -297,6 +331,42 @@ impl CosineTable {
             let row = &self.values[idx * self.t..(idx + 1) * self.t];
             for (o, v) in out.iter_mut().zip(row) {
                 *o += w * v;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::labels::LabelCodebook;
+
+    /// The zero-row shortcut gives exactly what scoring every row gives, with the table and
+    /// with exact decoding, for zero rows anywhere (first, last, runs) and -0.0 rows (scored
+    /// normally).
+    #[test]
+    fn zero_rows_shortcut_changes_no_value() {
+        let book = LabelCodebook::new(5);
+        let positives = book.category_embedding(3);
+        let mut rng = fastrand::Rng::with_seed(9);
+        let mut features = Vec::new();
+        for i in 0..5000 {
+            let zero = i == 0 || i == 4999 || (1000..1400).contains(&i) || rng.f32() < 0.5;
+            for _ in 0..3 {
+                features.push(if zero { 0.0 } else { rng.f32() * 2.0 - 1.0 });
+            }
+        }
+        features[3 * 2500..3 * 2501].copy_from_slice(&[-0.0, -0.0, -0.0]);
+        for precision in [Precision::Table(24), Precision::Exact] {
+            let field =
+                RelevanceField::new(&book.decoder, &positives, &book.negatives(), precision)
+                    .unwrap();
+            field.prepare(&features);
+            let shortcut = field.relevance(&features);
+            let every_row = field.scores(&features);
+            assert_eq!(shortcut.len(), every_row.len());
+            for (a, b) in shortcut.iter().zip(&every_row) {
+                assert_eq!(a.to_bits(), b.to_bits(), "{precision:?}");
             }
         }
     }
