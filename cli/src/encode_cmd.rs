@@ -30,7 +30,7 @@ pub struct CodecArgs {
     #[arg(long, default_value = "lossless")]
     pub quality: String,
     /// Override quantisation bits, e.g. `position=15,sh_rest=5` (keys: position, log_scale,
-    /// rotation, opacity, sh_dc, sh_rest, lang). Implies grid coding (preset `high` if
+    /// rotation, opacity, sh_dc, sh_rest (SH band 1), sh_high (SH bands 2-3), lang). Implies grid coding (preset `high` if
     /// `--quality lossless`).
     #[arg(long)]
     pub bits: Option<String>,
@@ -125,6 +125,7 @@ impl CodecArgs {
                     "opacity" => bits.opacity = v,
                     "sh_dc" => bits.sh_dc = v,
                     "sh_rest" => bits.sh_rest = v,
+                    "sh_high" => bits.sh_high = v,
                     "lang" => bits.lang = v,
                     _ => bail!("--bits: unknown attribute `{k}`"),
                 }

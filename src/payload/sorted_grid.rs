@@ -22,7 +22,11 @@ pub struct QuantBits {
     /// Colour and language opacity, after the sigmoid.
     pub opacity: u8,
     pub sh_dc: u8,
+    /// SH band 1 (coefficients 1-3).
     pub sh_rest: u8,
+    /// SH bands 2 and 3 (coefficients 4-15): on real scenes their effect on the image is
+    /// scene-dependent and mostly small (BENCHMARKS.md "SH bands").
+    pub sh_high: u8,
     pub lang: u8,
 }
 
@@ -36,6 +40,7 @@ impl QuantBits {
         opacity: 11,
         sh_dc: 11,
         sh_rest: 9,
+        sh_high: 9,
         lang: 11,
     };
     pub const HIGH: QuantBits = QuantBits {
@@ -45,6 +50,7 @@ impl QuantBits {
         opacity: 8,
         sh_dc: 8,
         sh_rest: 6,
+        sh_high: 5,
         lang: 8,
     };
     pub const MEDIUM: QuantBits = QuantBits {
@@ -54,6 +60,7 @@ impl QuantBits {
         opacity: 7,
         sh_dc: 7,
         sh_rest: 5,
+        sh_high: 4,
         lang: 7,
     };
     pub const LOW: QuantBits = QuantBits {
@@ -63,6 +70,7 @@ impl QuantBits {
         opacity: 6,
         sh_dc: 6,
         sh_rest: 4,
+        sh_high: 3,
         lang: 6,
     };
     pub fn preset(name: &str) -> Option<QuantBits> {
@@ -74,7 +82,7 @@ impl QuantBits {
             _ => None,
         }
     }
-    fn all(&self) -> [u8; 7] {
+    fn all(&self) -> [u8; 8] {
         [
             self.position,
             self.log_scale,
@@ -82,6 +90,7 @@ impl QuantBits {
             self.opacity,
             self.sh_dc,
             self.sh_rest,
+            self.sh_high,
             self.lang,
         ]
     }
@@ -123,7 +132,8 @@ impl Kind {
             Kind::Rotation(_) => b.rotation,
             Kind::Opacity | Kind::LangOpacity => b.opacity,
             Kind::Sh(j) if j < 3 => b.sh_dc,
-            Kind::Sh(_) => b.sh_rest,
+            Kind::Sh(j) if j < 12 => b.sh_rest,
+            Kind::Sh(_) => b.sh_high,
             Kind::Lang(_) => b.lang,
         }
     }
