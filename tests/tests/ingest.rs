@@ -334,6 +334,22 @@ fn damaged_runs_give_clear_errors() {
     );
     restore(&p, saved.as_bytes());
 
+    // A grid that is not square: a 5x7 lossless float image (imagecodecs, see
+    // tests/fixtures/README.md) as the static positions.
+    let xyz = g0.join("_xyz.jxl");
+    let saved_xyz = std::fs::read(&xyz).unwrap();
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/non_square_5x7.jxl"),
+        &xyz,
+    )
+    .unwrap();
+    let e = read_error(&dirs);
+    assert!(
+        e.contains("_xyz") && e.contains("35 Gaussians is not a square grid"),
+        "{e}"
+    );
+    restore(&xyz, &saved_xyz);
+
     // NaN in a range: the CSV's min.
     let bad = saved.replacen("_opacity,-", "_opacity,nan,", 1);
     let bad = bad.replacen("nan,6", "nan,", 1);
