@@ -1,10 +1,11 @@
 //! Sorting Gaussians into a 2D grid so that grid neighbours are similar (format-spec §6.5.1),
 //! in the spirit of PLAS (Morgenstern et al., "Compact 3D Scene Representation via
 //! Self-Organizing Gaussian Grids"): an initial layout by recursive median splits of the
-//! positions (a k-d tree unrolled onto the grid), then rounds of "move towards the blurred
-//! grid": the grid of feature vectors is box-filtered, and within groups of four cells the
-//! permutation (of 24) closest to the blurred target is kept. Radii shrink from a quarter of
-//! the grid to 1. Deterministic: no randomness, groups are disjoint so rounds run in parallel
+//! positions (a k-d tree unrolled onto the grid), then, only when asked (`passes` above
+//! zero; the layout alone codes smaller on every real scene measured), rounds of "move towards
+//! the blurred grid": the grid of feature vectors is box-filtered, and within groups of four
+//! cells the permutation (of 24) closest to the blurred target is kept. Radii shrink from a
+//! quarter of the grid to 1. Deterministic: no randomness, groups are disjoint so rounds run in parallel
 //! with the same result on any thread count.
 
 use dlgs::model::Gaussians;

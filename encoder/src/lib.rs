@@ -92,6 +92,8 @@ pub fn bounds_like_quantisation(bits: &QuantBits, c: &Canonical) -> Vec<(AttrGro
                 AttrGroup::LogScale => bits.log_scale,
                 AttrGroup::Rotation => bits.rotation,
                 AttrGroup::ShDc => bits.sh_dc,
+                // Bands 2-3 are coded with `sh_high <= sh_rest` bits: the finer band-1 step
+                // bounds the whole group (stricter, never looser, than the canonical error).
                 AttrGroup::ShRest => bits.sh_rest,
                 AttrGroup::Opacity | AttrGroup::LangOpacity => bits.opacity,
                 AttrGroup::Lang => bits.lang,

@@ -41,16 +41,20 @@ impl StateDict {
         self.tensors.get(key)
     }
 
+    /// `key`, or an error naming the checkpoint and the tensor.
+    fn require(&self, key: &str) -> Result<&Tensor, IngestError> {
+        self.get(key).ok_or_else(|| IngestError::Missing {
+            path: self.what.clone().into(),
+            what: format!("tensor {key}"),
+        })
+    }
+
     /// Float values of `key`, whose shape must be `n` rows of `row` values (any trailing
     /// dimensions, e.g. SH's (N, K, 3)).
     fn rows(&self, key: &str, row: Option<usize>) -> Result<(Vec<f32>, usize), IngestError> {
         let what = format!("{}: {key}", self.what);
-        let t = self.get(key).ok_or_else(|| IngestError::Missing {
-            path: self.what.clone().into(),
-            what: format!("tensor {key}"),
-        })?;
-        let n = *t.shape.first().unwrap_or(&0);
-        let width = t.shape[1.min(t.shape.len())..].iter().product::<usize>();
+        let t = self.require(key)?;
+        let width = t.shape.iter().skip(1).product::<usize>();
         if t.shape.len() < 2 || row.is_some_and(|r| r != width) {
             return Err(IngestError::shape(
                 &what,
@@ -62,7 +66,7 @@ impl StateDict {
             ));
         }
         let v = t.f32s(&what)?;
-        if v.len() != n * width {
+        if v.len() != t.shape[0] * width {
             return Err(IngestError::shape(&what, "values do not fill the shape"));
         }
         check_finite(&what, &v)?;
@@ -96,12 +100,7 @@ impl StateDict {
     /// `_point_feats` (N_dynamic, 7, 16), exactly as trained.
     fn features(&self, n: usize) -> Result<TimeFeatures, IngestError> {
         let what = format!("{}: _point_feats", self.what);
-        let t = self
-            .get("_point_feats")
-            .ok_or_else(|| IngestError::Missing {
-                path: self.what.clone().into(),
-                what: "tensor _point_feats".into(),
-            })?;
+        let t = self.require("_point_feats")?;
         if t.shape != [n, KEYS, CHANNELS] {
             return Err(IngestError::shape(
                 &what,
@@ -150,12 +149,7 @@ fn gop(
     dynamics: Gaussians,
     scale_offsets: bool,
 ) -> Result<RefGop, IngestError> {
-    if statics.sh_degree != dynamics.sh_degree || statics.lang_width != dynamics.lang_width {
-        return Err(IngestError::shape(
-            &sd.what,
-            "static and dynamic sets differ in SH degree or language",
-        ));
-    }
+    run::check_sets(&statics, &dynamics, &sd.what)?;
     let language = statics.lang_width > 0;
     Ok(RefGop {
         dir: dir.to_path_buf(),

@@ -496,17 +496,27 @@ fn csv_rows(dir: &Path) -> Result<Vec<Row>, IngestError> {
     csv::parse(&text, &what)
 }
 
+/// Static and dynamic sets of one GOP must agree on SH degree and language.
+pub(crate) fn check_sets(
+    statics: &Gaussians,
+    dynamics: &Gaussians,
+    what: &str,
+) -> Result<(), IngestError> {
+    if statics.sh_degree != dynamics.sh_degree || statics.lang_width != dynamics.lang_width {
+        return Err(IngestError::shape(
+            what,
+            "static and dynamic sets differ in SH degree or language",
+        ));
+    }
+    Ok(())
+}
+
 /// Read GOP 0 (full canonical state).
 pub fn read_first(dir: &Path) -> Result<RefGop, IngestError> {
     let rows = csv_rows(dir)?;
     let statics = read_set(dir, &rows, "")?.gaussians(&dir.display().to_string())?;
     let dynamics = read_set(dir, &rows, "_dynamic")?.gaussians(&dir.display().to_string())?;
-    if statics.sh_degree != dynamics.sh_degree || statics.lang_width != dynamics.lang_width {
-        return Err(IngestError::shape(
-            &dir.display().to_string(),
-            "static and dynamic sets differ in SH degree or language",
-        ));
-    }
+    check_sets(&statics, &dynamics, &dir.display().to_string())?;
     let language = statics.lang_width > 0;
     let (features, feature_source) = read_features(dir, &rows, dynamics.len())?;
     Ok(RefGop {

@@ -115,6 +115,15 @@ type Storages = HashMap<String, (DType, Vec<u8>)>;
 
 /// Build the tensor a `_rebuild_tensor_v2(storage, offset, size, stride, ...)` call describes.
 /// `storage_of` maps the call's storage argument to its dtype and bytes.
+/// A pickled tuple of ints (a tensor's size or stride).
+fn int_tuple(p: &Pickle, id: Id, what: &str) -> Result<Vec<i64>, String> {
+    p.items(id)
+        .ok_or(format!("{what} is not a tuple"))?
+        .iter()
+        .map(|&i| p.int(i).ok_or(format!("{what} entry is not an int")))
+        .collect()
+}
+
 fn rebuild<'s>(p: &Pickle, call_args: Id, storage_of: StorageOf<'_, 's>) -> Result<Tensor, String> {
     let args = p
         .items(call_args)
@@ -125,18 +134,8 @@ fn rebuild<'s>(p: &Pickle, call_args: Id, storage_of: StorageOf<'_, 's>) -> Resu
     let (dtype, data) = storage_of(args[0])?;
     let data: &[u8] = &data;
     let offset = p.int(args[1]).ok_or("storage offset is not an int")?;
-    let size: Vec<i64> = p
-        .items(args[2])
-        .ok_or("size is not a tuple")?
-        .iter()
-        .map(|&i| p.int(i).ok_or("size entry is not an int"))
-        .collect::<Result<_, _>>()?;
-    let stride: Vec<i64> = p
-        .items(args[3])
-        .ok_or("stride is not a tuple")?
-        .iter()
-        .map(|&i| p.int(i).ok_or("stride entry is not an int"))
-        .collect::<Result<_, _>>()?;
+    let size = int_tuple(p, args[2], "size")?;
+    let stride = int_tuple(p, args[3], "stride")?;
     if size.len() != stride.len() || size.iter().chain(&stride).any(|&v| v < 0) || offset < 0 {
         return Err("inconsistent size / stride / offset".into());
     }

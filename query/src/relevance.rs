@@ -133,10 +133,7 @@ impl<'a> RelevanceField<'a> {
             compact[(j + 1) * d..(j + 2) * d].copy_from_slice(&features[i * d..(i + 1) * d]);
         }
         let scored = self.scores(&compact);
-        let mut out = Vec::with_capacity(rows * k);
-        for _ in 0..rows {
-            out.extend_from_slice(&scored[..k]);
-        }
+        let mut out = scored[..k].repeat(rows);
         for (j, &i) in live.iter().enumerate() {
             out[i * k..(i + 1) * k].copy_from_slice(&scored[(j + 1) * k..(j + 2) * k]);
         }
