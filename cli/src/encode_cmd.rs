@@ -371,6 +371,10 @@ pub struct SynthArgs {
     /// Add 9-dim language (synthetic if the scene has none) and a language decoder.
     #[arg(long)]
     pub language: bool,
+    /// Typical offset the generated language MLP adds to the (unit-scale) language codes;
+    /// 0 = language constant over time.
+    #[arg(long, default_value_t = 0.1)]
+    pub language_motion: f32,
     /// Use the paper's plain lerp deformation instead of the reference code's.
     #[arg(long)]
     pub paper_lerp: bool,
@@ -399,6 +403,7 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
         fps: a.fps,
         motion: a.motion,
         language: a.language,
+        language_motion: a.language_motion,
         deform_model: if a.paper_lerp {
             DeformModel::PaperLerp
         } else {

@@ -405,7 +405,8 @@ pub fn run_labels(a: &LabelsArgs) -> Result<()> {
     let text = std::fs::read_to_string(&a.annotations)
         .with_context(|| format!("reading {}", a.annotations.display()))?;
     let labels = read_point_annotations(&text)?;
-    let book = LabelCodebook::new(a.seed);
+    // Codes placed so that categories touching in 3D blend without decoding to a third one.
+    let book = LabelCodebook::for_scene(&g, &labels, a.seed)?;
     let lg = book.apply(&g, &labels)?;
     std::fs::create_dir_all(&a.output)?;
     let scene_out = a.output.join("scene.ply");

@@ -30,6 +30,9 @@ pub struct SynthSpec {
     pub motion: f32,
     /// Add DLGStream's 9-dim language (synthetic if the scene has none) and a language decoder.
     pub language: bool,
+    /// Typical offset the generated language MLP adds to each language feature (the features
+    /// are unit-scale codes; 0 = language that does not change over time).
+    pub language_motion: f32,
     pub deform_model: DeformModel,
     pub seed: u64,
     /// Residual mode of the generated scene. Intra: every GOP has the same canonical state.
@@ -49,6 +52,7 @@ impl Default for SynthSpec {
             fps: 30,
             motion: 0.03,
             language: false,
+            language_motion: 0.1,
             deform_model: DeformModel::Reference,
             seed: 6666,
             residual_mode: ResidualMode::Intra,
@@ -280,6 +284,9 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
     if scene_g.len() < 2 {
         return Err(bad("the scene needs at least 2 Gaussians".into()));
     }
+    if !(spec.language_motion.is_finite() && spec.language_motion >= 0.0) {
+        return Err(bad("language motion must be finite and >= 0".into()));
+    }
     if !(spec.dynamic_fraction > 0.0 && spec.dynamic_fraction < 1.0) {
         return Err(bad("dynamic fraction must be in (0, 1)".into()));
     }
@@ -443,7 +450,7 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
         calibrate(&mut color, &app_x, &vec![0.08; 3 * coeffs]);
         let lang = g.has_language().then(|| {
             let mut l = random_mlp(&mut rng, MlpRole::Lang, 9);
-            calibrate(&mut l, &lang_x, &[0.1; 9]);
+            calibrate(&mut l, &lang_x, &[spec.language_motion; 9]);
             l
         });
         gops.push(DynamicGop {

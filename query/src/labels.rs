@@ -1,8 +1,9 @@
 //! SYNTHETIC language from per-Gaussian semantic labels, to test queries on real scenes with
 //! real labels (no CLIP model or trained language field exists here).
 //!
-//! Every category gets a unit 3-dim code (icosahedron vertices: 12 codes, 63.4 degrees
-//! apart); a constructed 3 -> 16 -> 32 -> 64 -> 128 -> 256 -> 512 ReLU decoder maps each
+//! Every category gets a unit 3-dim code: placed for the scene by [`LabelCodebook::for_scene`]
+//! (categories that touch in 3D get near-orthogonal codes, see `code_layout`), or the
+//! vertices of an icosahedron (12 codes, 63.4 degrees apart) by [`LabelCodebook::new`]; a constructed 3 -> 16 -> 32 -> 64 -> 128 -> 256 -> 512 ReLU decoder maps each
 //! code to its own unit 512-dim vector: the first layer's unit `j` is `ReLU(c_j . x - 0.5)`
 //! (zero at every other code), the middle layers pass it on, the last layer sums
 //! `h_j v_j + 0.01 v_bg`. The vectors `v_j` and `v_bg` are orthonormal; the four stand-in
@@ -16,6 +17,7 @@
 use dlgs::model::lang_decoder::{DenseLayer, LangDecoder, NamedEmbedding, REFERENCE_WIDTHS};
 use dlgs::Gaussians;
 
+use crate::code_layout;
 use crate::embeddings::Embeddings;
 use crate::error::{QueryError, Result};
 
@@ -23,8 +25,9 @@ use crate::error::{QueryError, Result};
 pub const MAX_CATEGORIES: usize = 10;
 const CODES: usize = 12;
 const CODE_LABELLED_COARSE: usize = 11;
-/// First-layer threshold: above cos(63.4 deg) = 0.447, so a code activates only its own unit,
-/// and a pixel needs more than half its weight from one category to decode to it.
+/// First-layer threshold: above every cosine between two codes (at most 0.447 for the
+/// icosahedron, `code_layout::MAX_COSINE` for placed codes), so a code activates only its own
+/// unit, and a pixel needs more than half its weight from one category to decode to it.
 const CAP: f32 = 0.5;
 const BACKGROUND_GAIN: f32 = 0.01;
 const NEGATIVE_SHARE: f32 = 0.3;
@@ -73,8 +76,51 @@ fn orthonormal(count: usize, dims: usize, seed: u64) -> Vec<Vec<f32>> {
 }
 
 impl LabelCodebook {
+    /// Codes at the vertices of an icosahedron (label `l` gets vertex `l`), whatever the scene.
     pub fn new(seed: u64) -> Self {
-        let codes = icosahedron();
+        Self::with_codes(icosahedron(), seed)
+    }
+
+    /// Codes placed for this scene (`code_layout`): categories whose Gaussians touch in 3D get
+    /// codes at least 90 degrees apart where 3 dimensions allow, so that a pixel blending them
+    /// decodes to a category only where that category holds more than half of it. Labels with
+    /// no Gaussian get no code (their unit never switches on). Falls back to [`Self::new`]'s
+    /// icosahedron if no placement keeps every pair apart.
+    pub fn for_scene(g: &Gaussians, labels: &[u16], seed: u64) -> Result<Self> {
+        check_labels(g, labels)?;
+        let mut present = [false; MAX_CATEGORIES];
+        labels.iter().for_each(|&l| present[l as usize] = true);
+        let slots: Vec<usize> = (1..MAX_CATEGORIES)
+            .filter(|&l| present[l])
+            .chain([CODE_LABELLED_COARSE])
+            .collect();
+        let touches = code_layout::touch_weights(g, labels, MAX_CATEGORIES);
+        let weights: Vec<Vec<f64>> = slots
+            .iter()
+            .map(|&a| {
+                slots
+                    .iter()
+                    .map(|&b| {
+                        if a < MAX_CATEGORIES && b < MAX_CATEGORIES {
+                            touches[a][b]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let Some(placed) = code_layout::place_codes(&weights, seed) else {
+            return Ok(Self::new(seed));
+        };
+        let mut codes = vec![[0.0f32; 3]; CODES];
+        for (&slot, c) in slots.iter().zip(placed) {
+            codes[slot] = c.map(|v| v as f32);
+        }
+        Ok(Self::with_codes(codes, seed))
+    }
+
+    fn with_codes(codes: Vec<[f32; 3]>, seed: u64) -> Self {
         let w = REFERENCE_WIDTHS;
         let embed = w[6];
         let vectors = orthonormal(CODES + 1 + NEGATIVE_NAMES.len(), embed, seed);

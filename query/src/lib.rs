@@ -9,6 +9,7 @@
 //! selection. Nothing here runs unless a query asks for it.
 
 pub mod batch_decode;
+pub mod code_layout;
 pub mod decoder_io;
 pub mod embeddings;
 pub mod error;

@@ -36,7 +36,7 @@ fn labelled_scene() -> (Gaussians, Vec<u16>, LabelCodebook) {
     let g = load(SCENE);
     let labels =
         read_point_annotations(&std::fs::read_to_string(data(ANNOTATIONS)).unwrap()).unwrap();
-    let book = LabelCodebook::new(7);
+    let book = LabelCodebook::for_scene(&g, &labels, 7).unwrap();
     let lg = book.apply(&g, &labels).unwrap();
     (lg, labels, book)
 }
@@ -51,6 +51,31 @@ fn cameras(g: &Gaussians, count: usize) -> Vec<Camera> {
             ..OrbitSpec::default()
         },
     )
+}
+
+/// `per` orbit cameras around each labelled category's own Gaussians (robust centre and
+/// radius of that category), rendering the whole scene: what a viewer looking at the object
+/// they ask about sees.
+fn framed_cameras(g: &Gaussians, labels: &[u16], per: usize) -> Vec<Camera> {
+    let mut cams = Vec::new();
+    for c in CATEGORIES {
+        let mut part = Gaussians::new(g.sh_degree, g.lang_width);
+        for i in (0..g.len()).filter(|&i| labels[i] == c) {
+            part.push_from(g, i);
+        }
+        if !part.is_empty() {
+            cams.extend(orbit_cameras(
+                &part,
+                &OrbitSpec {
+                    count: per,
+                    width: W,
+                    height: H,
+                    ..OrbitSpec::default()
+                },
+            ));
+        }
+    }
+    cams
 }
 
 fn with_language() -> RenderOptions {
@@ -190,33 +215,48 @@ fn category_masks_match_real_labels_from_eight_cameras() {
         .unwrap();
     let g = f.merged();
     let cams = cameras(&g, 8);
-    // The reference's filtering (29x29 mean, min-max, 2o-1 > 0.4, 7x7): measured mean 0.89,
-    // min 0.83 at 1352x1014 (BENCHMARKS.md); guarded here against regressions.
-    let rows = category_ious(
-        &g,
-        &labels,
-        &laed,
-        &book,
-        &cams,
-        Precision::default(),
-        &MaskParams::default(),
+    let pixels = (W * H) as usize;
+    let run = |cams: &[Camera], params: &MaskParams| {
+        category_ious(
+            &g,
+            &labels,
+            &laed,
+            &book,
+            cams,
+            Precision::default(),
+            params,
+        )
+    };
+    // Whole-scene views, the reference's filtering (29x29 mean, min-max, 2o-1 > 0.4, 7x7):
+    // measured mean 0.901, min 0.832 at 1352x1014. The categories here are paint drips a few
+    // pixels wide in these views (each covers 0.5-1.4 % of the image), and the 29x29 mean
+    // erodes them before the threshold; guarded against regressions.
+    let reference = check_visible(
+        &run(&cams, &MaskParams::default()),
+        pixels,
+        "static, whole scene, reference filtering",
+        0.8,
     );
-    let reference = check_visible(&rows, (W * H) as usize, "static, reference filtering", 0.8);
-    assert!(reference >= 0.87, "mean IoU {reference}");
-    // Without the 29x29 mean filter: the target, >= 0.9 for every visible pair.
-    // Without the 29x29 mean filter (measured mean 0.950, min 0.872; exact decoding instead of
-    // the table gives the same: the misses are pixels where two categories' codes blend).
-    let rows = category_ious(
-        &g,
-        &labels,
-        &laed,
-        &book,
-        &cams,
-        Precision::default(),
-        &unfiltered(),
+    assert!(reference >= 0.89, "mean IoU {reference}");
+    // The target, >= 0.9 for every visible pair, on the same views without the 29x29
+    // mean (measured mean 0.966, min 0.908) ...
+    let mean = check_visible(
+        &run(&cams, &unfiltered()),
+        pixels,
+        "static, whole scene, no mean filter",
+        0.9,
     );
-    let mean = check_visible(&rows, (W * H) as usize, "static, no mean filter", 0.85);
-    assert!(mean >= 0.94, "mean IoU {mean}");
+    assert!(mean >= 0.95, "mean IoU {mean}");
+    // ... and with the reference's filtering from views framing each category (3 per
+    // category; measured mean 0.958, min 0.922 over 25 visible pairs).
+    let framed = framed_cameras(&g, &labels, 3);
+    let mean = check_visible(
+        &run(&framed, &MaskParams::default()),
+        pixels,
+        "static, framed views, reference filtering",
+        0.9,
+    );
+    assert!(mean >= 0.95, "mean IoU {mean}");
 }
 
 #[test]
@@ -226,6 +266,10 @@ fn masks_follow_the_motion_of_a_dynamic_model() {
         dynamic_fraction: 0.4,
         motion: 0.08,
         language: true,
+        // The generator's default (0.1) moves codes far enough to flip pixels where a category
+        // holds 50-60 % (measured min IoU 0.815 / 0.887 / 0.854); a trained language field
+        // keeps an object's semantics, so the test drifts codes by 0.03.
+        language_motion: 0.03,
         ..SynthSpec::default()
     };
     let model = synth_dynamic(&lg, &spec).unwrap();
@@ -264,16 +308,15 @@ fn masks_follow_the_motion_of_a_dynamic_model() {
             Precision::default(),
             &unfiltered(),
         );
-        // Measured: mean 0.898 / 0.930 / 0.868, min 0.804 / 0.882 / 0.711 at t = 0 / 0.9 /
-        // 1.9 s. Lower than the static scene: the generated language decoder moves the dynamic
-        // Gaussians' codes by ~0.1, which flips pixels where a category holds 50-70 % weight.
+        // Measured: mean 0.947 / 0.955 / 0.944, min 0.906 / 0.916 / 0.902 at t = 0 / 0.9 /
+        // 1.9 s.
         let mean = check_visible(
             &rows,
             (W * H) as usize,
             &format!("t={t}, no mean filter"),
-            0.65,
+            0.9,
         );
-        assert!(mean >= 0.83, "t={t}: mean IoU {mean}");
+        assert!(mean >= 0.93, "t={t}: mean IoU {mean}");
         // Keep camera 0's label map of every category, to show that it moves.
         let gt_img = render(
             &one_hot(&g, &labels, 10).unwrap(),
