@@ -151,7 +151,9 @@ fn lookup<const D: usize>(
     let mut frac = [0f32; D];
     for d in 0..D {
         let pos = u[d] * (r - 2) as f32 + 0.5;
-        let fl = pos.floor();
+        // u is in [0, 1] (checked by the caller), so pos >= 0.5 and truncation is floor,
+        // without a libm call.
+        let fl = (pos as u32) as f32;
         g[d] = fl as u32;
         frac[d] = pos - fl;
     }
@@ -175,10 +177,12 @@ fn lookup<const D: usize>(
         if dropped {
             continue;
         }
+        // `table` is a power of two: masking is the modulo of §6.6.3 without a division.
+        let mask = table - 1;
         let index = if dense {
-            (idx % table as u64) as usize
+            idx as usize & mask
         } else {
-            hash as usize % table
+            hash as usize & mask
         };
         wsum += w;
         add(index, w);
@@ -327,22 +331,43 @@ impl NtcField {
         const BLOCK: usize = 256;
         let t = self.tables();
         let m = &self.mlp;
-        let no = m.outputs;
-        // Transposed weights make the inner loops contiguous; the arithmetic order is that of
-        // §6.6.4 (each output's sum runs over its inputs in order).
-        let w1t = transpose(&m.w1, m.hidden, m.inputs);
-        let w2t = transpose(&m.w2, no, m.hidden);
+        let (ni, nh, no) = (m.inputs, m.hidden, m.outputs);
         let mut rows = vec![0f32; positions.len() * no];
         rows.par_chunks_mut(BLOCK * no)
             .zip(positions.par_chunks(BLOCK))
             .for_each(|(chunk, pos)| {
-                let mut x = vec![0f32; m.inputs];
-                let mut h = vec![0f32; m.hidden];
-                for (row, &p) in chunk.chunks_mut(no).zip(pos) {
+                // LANES rows inside the box go through the MLP together, one per SIMD lane.
+                let mut x = vec![0f32; ni];
+                let mut xt = vec![[0f32; LANES]; ni];
+                let mut ht = vec![[0f32; LANES]; nh];
+                let mut yt = vec![[0f32; LANES]; no];
+                let mut which = [0usize; LANES];
+                let mut k = 0;
+                let mut flush =
+                    |k: usize, which: &[usize], xt: &[[f32; LANES]], chunk: &mut [f32]| {
+                        mlp_lanes(xt, &m.w1, &m.b1, &m.w2, &m.b2, &mut ht, &mut yt);
+                        for (l, &i) in which[..k].iter().enumerate() {
+                            for (o, y) in yt.iter().enumerate() {
+                                chunk[i * no + o] = y[l];
+                            }
+                        }
+                    };
+                for (i, &p) in pos.iter().enumerate() {
                     if !self.features(&t, p, &mut x) {
                         continue;
                     }
-                    mlp_row(&x, &w1t, &m.b1, &w2t, &m.b2, &mut h, row);
+                    for (col, &v) in xt.iter_mut().zip(&x) {
+                        col[k] = v;
+                    }
+                    which[k] = i;
+                    k += 1;
+                    if k == LANES {
+                        flush(k, &which, &xt, chunk);
+                        k = 0;
+                    }
+                }
+                if k > 0 {
+                    flush(k, &which, &xt, chunk);
                 }
             });
         rows
@@ -391,33 +416,61 @@ impl NtcField {
     }
 }
 
-/// One MLP row with transposed weights (`w1t[i * hidden + j]`, `w2t[j * outputs + o]`): the
-/// same fused multiply-adds in the same order as [`NtcField::mlp_into`], vectorised across
-/// outputs. Compiled for several CPUs and picked at run time; `mul_add` is exact everywhere,
-/// so every path gives the same bits.
+/// Rows the NTC MLP evaluates together, one per SIMD lane.
+const LANES: usize = 8;
+/// Units (hidden or output) accumulated at once: independent FMA chains hide their latency.
+const UNITS: usize = 8;
+
+/// The NTC MLP on `LANES` rows at once, transposed (`xt[i][lane]`, `ht[j][lane]`,
+/// `yt[o][lane]`), with the PyTorch-layout weights (`w1[j * inputs + i]`,
+/// `w2[o * hidden + j]`). Each lane takes exactly the fused multiply-adds of
+/// [`NtcField::mlp_into`] in the same order (unit starts at its bias, inputs in order), so the
+/// rows are bit-identical to it; unused lanes compute garbage that is never read. Compiled for
+/// several CPUs and picked at run time; `mul_add` is exact everywhere, so every path gives the
+/// same bits.
 #[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
-fn mlp_row(
-    x: &[f32],
-    w1t: &[f32],
+fn mlp_lanes(
+    xt: &[[f32; LANES]],
+    w1: &[f32],
     b1: &[f32],
-    w2t: &[f32],
+    w2: &[f32],
     b2: &[f32],
-    h: &mut [f32],
-    out: &mut [f32],
+    ht: &mut [[f32; LANES]],
+    yt: &mut [[f32; LANES]],
 ) {
-    let (nh, no) = (h.len(), out.len());
-    h.copy_from_slice(b1);
-    for (i, &xi) in x.iter().enumerate() {
-        for (hj, &w) in h.iter_mut().zip(&w1t[i * nh..(i + 1) * nh]) {
-            *hj = w.mul_add(xi, *hj);
+    layer_lanes(xt, w1, b1, ht, false);
+    layer_lanes(ht, w2, b2, yt, true);
+}
+
+/// `out[u] = b[u] + sum_i w[u][i] * f(input[i])` per lane, `f` = ReLU when `relu_input`.
+#[inline(always)]
+fn layer_lanes(
+    input: &[[f32; LANES]],
+    w: &[f32],
+    b: &[f32],
+    out: &mut [[f32; LANES]],
+    relu_input: bool,
+) {
+    let ni = input.len();
+    for (u0, dst) in (0..out.len()).step_by(UNITS).zip(out.chunks_mut(UNITS)) {
+        let mut acc = [[0f32; LANES]; UNITS];
+        for (q, a) in acc.iter_mut().enumerate().take(dst.len()) {
+            *a = [b[u0 + q]; LANES];
         }
-    }
-    out.copy_from_slice(b2);
-    for (j, &hj) in h.iter().enumerate() {
-        let hj = hj.max(0.0);
-        for (v, &w) in out.iter_mut().zip(&w2t[j * no..(j + 1) * no]) {
-            *v = w.mul_add(hj, *v);
+        for (i, x) in input.iter().enumerate() {
+            let x = if relu_input {
+                x.map(|v| v.max(0.0))
+            } else {
+                *x
+            };
+            for (q, a) in acc.iter_mut().enumerate().take(dst.len()) {
+                let wq = w[(u0 + q) * ni + i];
+                for (al, &xl) in a.iter_mut().zip(&x) {
+                    *al = wq.mul_add(xl, *al);
+                }
+            }
         }
+        dst.copy_from_slice(&acc[..dst.len()]);
     }
 }
 
@@ -435,16 +488,6 @@ fn entry_masks(bits: &BitSlice<u64, Lsb0>, f: usize) -> Vec<u8> {
         }
     }
     bits.chunks_exact(f).map(|e| e.load_le::<u8>()).collect()
-}
-
-fn transpose(w: &[f32], rows: usize, cols: usize) -> Vec<f32> {
-    let mut t = vec![0f32; w.len()];
-    for r in 0..rows {
-        for c in 0..cols {
-            t[c * rows + r] = w[r * cols + c];
-        }
-    }
-    t
 }
 
 #[cfg(test)]
