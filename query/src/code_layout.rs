@@ -3,10 +3,11 @@
 //! Alpha blending mixes the codes of Gaussians that share a pixel. With the decoder's first
 //! layer `ReLU(c_j . x - 1/2)`, a pixel holding share `a` of category A and `b` of B switches
 //! A's unit on when `a + b (c_A . c_B) > 1/2`: exactly the majority rule (`a > 1/2`) when
-//! `c_A . c_B <= 0`, but already at `a < 1/2` when the two codes point the same way. So codes
-//! of categories that touch in 3D should be at least 90 degrees apart, and every pair of codes
-//! far enough apart that a pure code never switches on another unit. 3 dimensions cannot make
-//! every pair orthogonal, so the placement weighs pairs by how much they touch.
+//! `c_A . c_B = 0`, already at `a < 1/2` when the two codes point the same way, and only
+//! above `a > 1/2` when they point apart. So codes of categories that touch in 3D should be
+//! orthogonal, and every pair of codes far enough apart that a pure code never switches on
+//! another unit. 3 dimensions cannot make every touching pair orthogonal, so the placement
+//! weighs pairs by how much they touch.
 
 use dlgs::Gaussians;
 
@@ -79,7 +80,7 @@ pub fn touch_weights(g: &Gaussians, labels: &[u16], classes: usize) -> Vec<Vec<f
 }
 
 /// Unit codes for `count` slots whose pairwise touch weights are `weights` (`count x count`;
-/// slots without touches are only kept apart). Minimises `sum w_ab max(0, c_a . c_b)^2`
+/// slots without touches are only kept apart). Minimises `sum w_ab (c_a . c_b)^2`
 /// subject to every cosine below [`MAX_COSINE`], by projected gradient descent from seeded
 /// random starts; deterministic. `None` when no start meets the separation.
 pub fn place_codes(weights: &[Vec<f64>], seed: u64) -> Option<Vec<[f64; 3]>> {

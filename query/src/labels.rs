@@ -1,10 +1,11 @@
 //! SYNTHETIC language from per-Gaussian semantic labels, to test queries on real scenes with
 //! real labels (no CLIP model or trained language field exists here).
 //!
-//! Every category gets a unit 3-dim code: placed for the scene by [`LabelCodebook::for_scene`]
-//! (categories that touch in 3D get near-orthogonal codes, see `code_layout`), or the
-//! vertices of an icosahedron (12 codes, 63.4 degrees apart) by [`LabelCodebook::new`]; a constructed 3 -> 16 -> 32 -> 64 -> 128 -> 256 -> 512 ReLU decoder maps each
-//! code to its own unit 512-dim vector: the first layer's unit `j` is `ReLU(c_j . x - 0.5)`
+//! Every category gets a unit 3-dim code: placed for the scene by
+//! [`LabelCodebook::for_scene`] (categories that touch in 3D get near-orthogonal codes, see
+//! `code_layout`), or the vertices of an icosahedron (12 codes, 63.4 degrees apart) by
+//! [`LabelCodebook::new`]; a constructed 3 -> 16 -> 32 -> 64 -> 128 -> 256 -> 512 ReLU
+//! decoder maps each code to its own unit 512-dim vector: the first layer's unit `j` is `ReLU(c_j . x - 0.5)`
 //! (zero at every other code), the middle layers pass it on, the last layer sums
 //! `h_j v_j + 0.01 v_bg`. The vectors `v_j` and `v_bg` are orthonormal; the four stand-in
 //! negatives have cosine ~0.2 with each of them, as generic CLIP phrases resemble everything.
@@ -82,7 +83,7 @@ impl LabelCodebook {
     }
 
     /// Codes placed for this scene (`code_layout`): categories whose Gaussians touch in 3D get
-    /// codes at least 90 degrees apart where 3 dimensions allow, so that a pixel blending them
+    /// near-orthogonal codes where 3 dimensions allow, so that a pixel blending them
     /// decodes to a category only where that category holds more than half of it. Labels with
     /// no Gaussian get no code (their unit never switches on). Falls back to [`Self::new`]'s
     /// icosahedron if no placement keeps every pair apart.
@@ -94,21 +95,11 @@ impl LabelCodebook {
             .filter(|&l| present[l])
             .chain([CODE_LABELLED_COARSE])
             .collect();
-        let touches = code_layout::touch_weights(g, labels, MAX_CATEGORIES);
+        // One row per code slot: the coarse code's slot touches nothing (no label reaches it).
+        let touches = code_layout::touch_weights(g, labels, CODES);
         let weights: Vec<Vec<f64>> = slots
             .iter()
-            .map(|&a| {
-                slots
-                    .iter()
-                    .map(|&b| {
-                        if a < MAX_CATEGORIES && b < MAX_CATEGORIES {
-                            touches[a][b]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect()
-            })
+            .map(|&a| slots.iter().map(|&b| touches[a][b]).collect())
             .collect();
         let Some(placed) = code_layout::place_codes(&weights, seed) else {
             return Ok(Self::new(seed));

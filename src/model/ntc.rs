@@ -158,6 +158,8 @@ fn lookup<const D: usize>(
         frac[d] = pos - fl;
     }
     let dense = (r as u64).pow(D as u32) <= table as u64;
+    // `table` is a power of two: masking is the modulo of §6.6.3 without a division.
+    let mask = table - 1;
     let mut wsum = 0f32;
     for corner in 0..(1usize << D) {
         let mut w = 1f32;
@@ -177,8 +179,6 @@ fn lookup<const D: usize>(
         if dropped {
             continue;
         }
-        // `table` is a power of two: masking is the modulo of §6.6.3 without a division.
-        let mask = table - 1;
         let index = if dense {
             idx as usize & mask
         } else {
