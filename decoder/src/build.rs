@@ -4,13 +4,14 @@
 use std::sync::Arc;
 
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader};
-use dlgs::model::DynamicGop;
+use dlgs::model::DeformMlps;
 use dlgs::payload::time_features::{self, TfeaBody};
 use dlgs::payload::{
     decode_canonical, decode_residual, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
 };
 use dlgs::{Error, ErrorKind, Limits, Result};
 
+use crate::planar::PlanarFeatures;
 use crate::{DecodedGop, Deformer, State};
 
 fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
@@ -75,6 +76,96 @@ pub(crate) fn state(
     })
 }
 
+/// The raw payloads of a GOP's time features (`TFEA`) and decoders (`MLPW`), with their offsets.
+pub(crate) struct DynamicPayloads {
+    tfea: (Vec<u8>, u64),
+    mlpw: (Vec<u8>, u64),
+}
+
+/// Read the dynamic payloads of a GOP (`None` when the scene has no dynamic Gaussians).
+pub(crate) fn dynamic_payloads(
+    scene: &SceneHeader,
+    chunks: &[ChunkInfo],
+    gop_at: u64,
+    mut payload: impl FnMut(&ChunkInfo) -> Result<Vec<u8>>,
+) -> Result<Option<DynamicPayloads>> {
+    if scene.n_dynamic == 0 {
+        return Ok(None);
+    }
+    let mut read = |ty: ChunkType| -> Result<(Vec<u8>, u64)> {
+        let c = find(chunks, ty).ok_or_else(|| Error::new(ErrorKind::MissingChunk(ty), gop_at))?;
+        Ok((payload(&c)?, c.payload_offset()))
+    };
+    Ok(Some(DynamicPayloads {
+        tfea: read(ChunkType::TFEA)?,
+        mlpw: read(ChunkType::MLPW)?,
+    }))
+}
+
+/// Decode the time features (HEVC included) straight into the deformer's key- and
+/// channel-major layout, and the decoders. Needs nothing of the canonical state, so the random
+/// access decoder runs it alongside the residual.
+pub(crate) fn decode_dynamic(
+    scene: &SceneHeader,
+    limits: &Limits,
+    p: &DynamicPayloads,
+) -> Result<(PlanarFeatures, DeformMlps)> {
+    let (bytes, at) = (&p.tfea.0, p.tfea.1);
+    let features = match time_features::decode(bytes, at, scene, limits)? {
+        TfeaBody::Exact(f) => PlanarFeatures::new(&f),
+        TfeaBody::Hevc {
+            tiling,
+            ranges,
+            reference,
+            packets,
+        } => {
+            let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
+            let video = dlgs_video::decode_gray12(
+                &refs,
+                tiling.width() as u32,
+                tiling.height() as u32,
+                tiling.keys,
+            )
+            .map_err(|e| video_error(e, at))?;
+            let data = match reference {
+                Some(range) => time_features::untile_columns(
+                    &video.frames,
+                    &tiling,
+                    time_features::reference_sample_value(range),
+                ),
+                None => time_features::untile_columns(
+                    &video.frames,
+                    &tiling,
+                    time_features::sample_value(&ranges),
+                ),
+            };
+            PlanarFeatures::from_columns(tiling.n, tiling.keys, tiling.channels, data)
+        }
+    };
+    let mlps = mlp_weights::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
+    Ok((features, mlps))
+}
+
+/// GOP `g` from its decoded canonical `state` and its decoded time features and decoders.
+pub(crate) fn assemble(
+    scene: &SceneHeader,
+    g: u32,
+    state: State,
+    dynamic: Option<(PlanarFeatures, DeformMlps)>,
+) -> DecodedGop {
+    let canonical = state.canonical;
+    let deformer = dynamic.map(|(features, mlps)| {
+        Deformer::from_planar(&canonical.dynamics, features, mlps, scene.deform_model)
+    });
+    DecodedGop {
+        index: g,
+        canonical,
+        deformer,
+        source: state.source,
+        ntc: state.ntc,
+    }
+}
+
 /// GOP `g` from its decoded canonical `state` and its time features and decoders.
 pub(crate) fn gop(
     scene: &SceneHeader,
@@ -83,49 +174,10 @@ pub(crate) fn gop(
     chunks: &[ChunkInfo],
     gop_at: u64,
     state: State,
-    mut payload: impl FnMut(&ChunkInfo) -> Result<Vec<u8>>,
+    payload: impl FnMut(&ChunkInfo) -> Result<Vec<u8>>,
 ) -> Result<DecodedGop> {
-    let mut dynamic = None;
-    if scene.n_dynamic > 0 {
-        let tfea = find(chunks, ChunkType::TFEA)
-            .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::TFEA), gop_at))?;
-        let mlpw = find(chunks, ChunkType::MLPW)
-            .ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::MLPW), gop_at))?;
-        let p = payload(&tfea)?;
-        let at = tfea.payload_offset();
-        let features = match time_features::decode(&p, at, scene, limits)? {
-            TfeaBody::Exact(f) => f,
-            TfeaBody::Hevc {
-                tiling,
-                ranges,
-                reference,
-                packets,
-            } => {
-                let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
-                let video = dlgs_video::decode_gray12(
-                    &refs,
-                    tiling.width() as u32,
-                    tiling.height() as u32,
-                    tiling.keys,
-                )
-                .map_err(|e| video_error(e, at))?;
-                match reference {
-                    Some(range) => time_features::untile_reference(&video.frames, &tiling, range),
-                    None => time_features::untile(&video.frames, &tiling, &ranges),
-                }
-            }
-        };
-        let p = payload(&mlpw)?;
-        let mlps = mlp_weights::decode(&p, mlpw.payload_offset(), scene, limits)?;
-        dynamic = Some(DynamicGop { features, mlps });
-    }
-    let canonical = state.canonical;
-    let deformer = dynamic.map(|d| Deformer::new(&canonical.dynamics, d, scene.deform_model));
-    Ok(DecodedGop {
-        index: g,
-        canonical,
-        deformer,
-        source: state.source,
-        ntc: state.ntc,
-    })
+    let dynamic = dynamic_payloads(scene, chunks, gop_at, payload)?
+        .map(|p| decode_dynamic(scene, limits, &p))
+        .transpose()?;
+    Ok(assemble(scene, g, state, dynamic))
 }

@@ -100,7 +100,17 @@ impl Deformer {
     /// Prepare a GOP; for the reference model, evaluates the geometry decoders on every key
     /// (`N * K` rows).
     pub fn new(canon: &Gaussians, gop: DynamicGop, model: DeformModel) -> Self {
-        let m = &gop.mlps;
+        Self::from_planar(canon, PlanarFeatures::new(&gop.features), gop.mlps, model)
+    }
+
+    /// [`Self::new`] from time features already laid out key- and channel-major.
+    pub fn from_planar(
+        canon: &Gaussians,
+        features: PlanarFeatures,
+        mlps: DeformMlps,
+        model: DeformModel,
+    ) -> Self {
+        let m = &mlps;
         let mut d = Deformer {
             model,
             deform: PanelMlp::new(&m.deform),
@@ -110,8 +120,8 @@ impl Deformer {
             lang: m.lang.as_ref().map(PanelMlp::new),
             scale_offsets: m.scale_offsets,
             geometry: None,
-            features: PlanarFeatures::new(&gop.features),
-            mlps: gop.mlps,
+            features,
+            mlps,
         };
         if model == DeformModel::Reference {
             d.geometry = Some(d.key_geometry(canon));

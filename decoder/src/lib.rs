@@ -205,17 +205,25 @@ impl<R: Read + Seek> Decoder<R> {
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        let state = self.state(g)?;
         let reader = &mut self.reader;
-        let gop = Arc::new(build::gop(
-            &scene,
-            &limits,
-            g,
-            &chunks,
-            gop_at,
-            state,
-            |c| reader.payload(c),
-        )?);
+        let payloads = build::dynamic_payloads(&scene, &chunks, gop_at, |c| reader.payload(c))?;
+        // The time features (HEVC decode) need nothing of the canonical state: decode them on
+        // a second thread while this one decodes the state (residual application). Errors are
+        // reported state first, as a sequential decode would.
+        let (state, dynamic) = std::thread::scope(|s| {
+            let worker = s.spawn(|| {
+                payloads
+                    .as_ref()
+                    .map(|p| build::decode_dynamic(&scene, &limits, p))
+                    .transpose()
+            });
+            let state = self.state(g);
+            let dynamic = worker
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            (state, dynamic)
+        });
+        let gop = Arc::new(build::assemble(&scene, g, state?, dynamic?));
         self.cached = Some(gop.clone());
         Ok(gop)
     }

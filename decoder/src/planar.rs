@@ -20,6 +20,17 @@ pub struct PlanarFeatures {
 }
 
 impl PlanarFeatures {
+    /// From features already laid out `(K, C, N)` (see `time_features::untile_columns`).
+    pub fn from_columns(n: usize, keys: usize, channels: usize, data: Vec<f32>) -> Self {
+        assert_eq!(data.len(), n * keys * channels, "(K, C, N) layout");
+        PlanarFeatures {
+            n,
+            keys,
+            channels,
+            data,
+        }
+    }
+
     pub fn new(f: &TimeFeatures) -> Self {
         let (n, keys, ch) = (f.n, f.keys, f.channels);
         let mut data = vec![0f32; f.data.len()];

@@ -191,10 +191,70 @@ fn lookup<const D: usize>(
 }
 
 /// Decoded grids in a lookup-friendly form: per plane level one byte per entry holding its
-/// feature bits.
+/// feature bits (the plain path), the same levels packed two entries per byte when they have
+/// at most 4 features (the fast path: all 12 reference levels fit in 192 KiB, so they stay in
+/// L2 cache), and the gate bits as words.
 struct Tables {
     planes: Vec<Vec<u8>>,
     gate: Vec<u8>,
+    packed: Vec<Vec<u8>>,
+    gate_words: Vec<u64>,
+}
+
+/// `SIGNS[m][f]` is +1 when bit f of `m` is set, else -1: one entry's features as floats.
+static SIGNS: [[f32; 8]; 256] = {
+    let mut t = [[0f32; 8]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let mut f = 0;
+        while f < 8 {
+            t[m][f] = if m >> f & 1 == 1 { 1.0 } else { -1.0 };
+            f += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
+/// The four corners of a 2D level read at `(ua, ub)` (§6.6.4 steps 1-2): entry indices and
+/// weights, with the weight of a dropped corner marked by `keep = false`.
+#[inline(always)]
+fn plane_corners(
+    ua: f32,
+    ub: f32,
+    r: u32,
+    mask: usize,
+    dense: bool,
+) -> ([usize; 4], [f32; 4], [bool; 4]) {
+    let axis = |u: f32| {
+        let pos = u * (r - 2) as f32 + 0.5;
+        let fl = (pos as u32) as f32;
+        let g = fl as u32;
+        let frac = pos - fl;
+        let k = [g, (g + 1).min(r - 1)];
+        (
+            [1.0 - frac, frac],
+            k,
+            [k[0] != 0 && k[0] != r - 1, k[1] != 0 && k[1] != r - 1],
+        )
+    };
+    let (wa, ka, oka) = axis(ua);
+    let (wb, kb, okb) = axis(ub);
+    let mut idx = [0usize; 4];
+    let mut w = [0f32; 4];
+    let mut keep = [false; 4];
+    for c in 0..4 {
+        let (i, j) = (c & 1, c >> 1);
+        // The plain path multiplies 1 * w_a * w_b; 1 * w_a is w_a exactly.
+        w[c] = wa[i] * wb[j];
+        keep[c] = oka[i] && okb[j];
+        idx[c] = if dense {
+            (ka[i] as u64 + kb[j] as u64 * r as u64) as usize & mask
+        } else {
+            (ka[i].wrapping_mul(PRIMES[0]) ^ kb[j].wrapping_mul(PRIMES[1])) as usize & mask
+        };
+    }
+    (idx, w, keep)
 }
 
 impl NtcField {
@@ -259,14 +319,96 @@ impl NtcField {
 
     fn tables(&self) -> Tables {
         let f = self.config.features as usize;
-        Tables {
-            planes: self
-                .planes
+        let planes: Vec<Vec<u8>> = self
+            .planes
+            .iter()
+            .map(|bits| entry_masks(bits, f))
+            .collect();
+        let packed = if f <= 4 {
+            planes
                 .iter()
-                .map(|bits| entry_masks(bits, f))
-                .collect(),
-            gate: entry_masks(&self.gate, 1),
+                .map(|t| {
+                    t.chunks(2)
+                        .map(|e| e[0] | e.get(1).map_or(0, |m| m << 4))
+                        .collect()
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let mut gate_words = vec![0u64; self.gate.len().div_ceil(64)];
+        for i in self.gate.iter_ones() {
+            gate_words[i / 64] |= 1 << (i % 64);
         }
+        Tables {
+            gate: entry_masks(&self.gate, 1),
+            planes,
+            packed,
+            gate_words,
+        }
+    }
+
+    /// [`Self::features`] for grids of at most 4 features, bit-identical to it: the same
+    /// floating-point operations in the same order, with the corner indices of all levels
+    /// computed before any table byte is read (so the reads overlap instead of waiting on one
+    /// another), nibble-packed tables and a sign table instead of per-bit branches.
+    fn features_packed(&self, t: &Tables, p: [f32; 3], out: &mut [f32]) -> bool {
+        let mut u = [0f32; 3];
+        for a in 0..3 {
+            u[a] = (p[a] - self.bound_min[a]) / (self.bound_max[a] - self.bound_min[a]);
+            if !(0.0..=1.0).contains(&u[a]) {
+                return false;
+            }
+        }
+        let c = &self.config;
+        let nf = c.features as usize;
+        let lv = c.levels();
+        let mask = c.table() - 1;
+        let sign = |bit: bool| if bit { 1.0f32 } else { -1.0 };
+        let mut gv = 0f32;
+        let gsum = lookup::<3>(u, c.gate_resolution, c.gate_table(), |i, w| {
+            gv += w * sign(t.gate_words[i / 64] >> (i % 64) & 1 == 1)
+        });
+        let gate = (1.0 / (1.0 + (-((gv / gsum) as f64)).exp())) as f32;
+        const MAX: usize = 3 * 16;
+        let mut idx = [[0usize; 4]; MAX];
+        let mut wts = [[0f32; 4]; MAX];
+        let mut keep = [[false; 4]; MAX];
+        for (pi, &(a, b)) in PLANES.iter().enumerate() {
+            for (l, &r) in c.resolutions.iter().enumerate() {
+                let dense = (r as u64).pow(2) <= c.table() as u64;
+                let k = pi * lv + l;
+                (idx[k], wts[k], keep[k]) = plane_corners(u[a], u[b], r, mask, dense);
+            }
+        }
+        let mut ent = [[0u8; 4]; MAX];
+        for k in 0..3 * lv {
+            let tab = &t.packed[k];
+            for q in 0..4 {
+                let e = idx[k][q];
+                ent[k][q] = tab[e >> 1] >> ((e & 1) * 4) & 0xf;
+            }
+        }
+        for k in 0..3 * lv {
+            let mut acc = [0f32; 4];
+            let mut wsum = 0f32;
+            for q in 0..4 {
+                if !keep[k][q] {
+                    continue;
+                }
+                let w = wts[k][q];
+                wsum += w;
+                let s = &SIGNS[ent[k][q] as usize];
+                for f in 0..4 {
+                    acc[f] += w * s[f];
+                }
+            }
+            let s = wsum + WEIGHT_EPS;
+            for (o, &v) in out[k * nf..(k + 1) * nf].iter_mut().zip(&acc) {
+                *o = v / s * gate;
+            }
+        }
+        true
     }
 
     /// The MLP input of a position, or `None` outside the box (§6.6.3).
@@ -332,6 +474,8 @@ impl NtcField {
         let t = self.tables();
         let m = &self.mlp;
         let (ni, nh, no) = (m.inputs, m.hidden, m.outputs);
+        let l1 = PackedLayer::new(&m.w1, &m.b1, ni);
+        let l2 = PackedLayer::new(&m.w2, &m.b2, nh);
         let mut rows = vec![0f32; positions.len() * no];
         rows.par_chunks_mut(BLOCK * no)
             .zip(positions.par_chunks(BLOCK))
@@ -345,7 +489,7 @@ impl NtcField {
                 let mut k = 0;
                 let mut flush =
                     |k: usize, which: &[usize], xt: &[[f32; LANES]], chunk: &mut [f32]| {
-                        mlp_lanes(xt, &m.w1, &m.b1, &m.w2, &m.b2, &mut ht, &mut yt);
+                        mlp_lanes(xt, &l1, &l2, &mut ht, &mut yt);
                         for (l, &i) in which[..k].iter().enumerate() {
                             for (o, y) in yt.iter().enumerate() {
                                 chunk[i * no + o] = y[l];
@@ -353,7 +497,12 @@ impl NtcField {
                         }
                     };
                 for (i, &p) in pos.iter().enumerate() {
-                    if !self.features(&t, p, &mut x) {
+                    let inside = if t.packed.is_empty() {
+                        self.features(&t, p, &mut x)
+                    } else {
+                        self.features_packed(&t, p, &mut x)
+                    };
+                    if !inside {
                         continue;
                     }
                     for (col, &v) in xt.iter_mut().zip(&x) {
@@ -421,56 +570,77 @@ const LANES: usize = 8;
 /// Units (hidden or output) accumulated at once: independent FMA chains hide their latency.
 const UNITS: usize = 8;
 
+/// One MLP layer with its units in blocks of `UNITS`: `w[block * inputs + i][q]` is the weight
+/// of input i for unit `block * UNITS + q`, so the inner loop reads one contiguous row of
+/// weights per input with no bounds checks. Units past the layer's width have zero weights and
+/// are never read back.
+struct PackedLayer {
+    w: Vec<[f32; UNITS]>,
+    b: Vec<[f32; UNITS]>,
+}
+
+impl PackedLayer {
+    /// From PyTorch layout (`w[u * inputs + i]`).
+    fn new(w: &[f32], b: &[f32], inputs: usize) -> Self {
+        let blocks = b.len().div_ceil(UNITS);
+        let mut pw = vec![[0f32; UNITS]; blocks * inputs];
+        let mut pb = vec![[0f32; UNITS]; blocks];
+        for (u, &bias) in b.iter().enumerate() {
+            pb[u / UNITS][u % UNITS] = bias;
+            for i in 0..inputs {
+                pw[u / UNITS * inputs + i][u % UNITS] = w[u * inputs + i];
+            }
+        }
+        PackedLayer { w: pw, b: pb }
+    }
+}
+
 /// The NTC MLP on `LANES` rows at once, transposed (`xt[i][lane]`, `ht[j][lane]`,
-/// `yt[o][lane]`), with the PyTorch-layout weights (`w1[j * inputs + i]`,
-/// `w2[o * hidden + j]`). Each lane takes exactly the fused multiply-adds of
-/// [`NtcField::mlp_into`] in the same order (unit starts at its bias, inputs in order), so the
-/// rows are bit-identical to it; unused lanes compute garbage that is never read. Compiled for
-/// several CPUs and picked at run time; `mul_add` is exact everywhere, so every path gives the
-/// same bits.
+/// `yt[o][lane]`). Each lane takes exactly the fused multiply-adds of [`NtcField::mlp_into`] in
+/// the same order (unit starts at its bias, inputs in order), so the rows are bit-identical to
+/// it; unused lanes compute garbage that is never read. Compiled for several CPUs and picked at
+/// run time; `mul_add` is exact everywhere, so every path gives the same bits.
 #[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
 fn mlp_lanes(
     xt: &[[f32; LANES]],
-    w1: &[f32],
-    b1: &[f32],
-    w2: &[f32],
-    b2: &[f32],
+    l1: &PackedLayer,
+    l2: &PackedLayer,
     ht: &mut [[f32; LANES]],
     yt: &mut [[f32; LANES]],
 ) {
-    layer_lanes(xt, w1, b1, ht, false);
-    layer_lanes(ht, w2, b2, yt, true);
+    layer_lanes(xt, l1, ht, false);
+    layer_lanes(ht, l2, yt, true);
 }
 
 /// `out[u] = b[u] + sum_i w[u][i] * f(input[i])` per lane, `f` = ReLU when `relu_input`.
 #[inline(always)]
 fn layer_lanes(
     input: &[[f32; LANES]],
-    w: &[f32],
-    b: &[f32],
+    layer: &PackedLayer,
     out: &mut [[f32; LANES]],
     relu_input: bool,
 ) {
     let ni = input.len();
-    for (u0, dst) in (0..out.len()).step_by(UNITS).zip(out.chunks_mut(UNITS)) {
+    for (blk, (wb, bias)) in layer.w.chunks_exact(ni).zip(&layer.b).enumerate() {
         let mut acc = [[0f32; LANES]; UNITS];
-        for (q, a) in acc.iter_mut().enumerate().take(dst.len()) {
-            *a = [b[u0 + q]; LANES];
+        for (a, &bq) in acc.iter_mut().zip(bias) {
+            *a = [bq; LANES];
         }
-        for (i, x) in input.iter().enumerate() {
+        for (x, wv) in input.iter().zip(wb) {
             let x = if relu_input {
                 x.map(|v| v.max(0.0))
             } else {
                 *x
             };
-            for (q, a) in acc.iter_mut().enumerate().take(dst.len()) {
-                let wq = w[(u0 + q) * ni + i];
+            for (a, &wq) in acc.iter_mut().zip(wv) {
                 for (al, &xl) in a.iter_mut().zip(&x) {
                     *al = wq.mul_add(xl, *al);
                 }
             }
         }
-        dst.copy_from_slice(&acc[..dst.len()]);
+        let base = blk * UNITS;
+        let n = UNITS.min(out.len() - base);
+        out[base..base + n].copy_from_slice(&acc[..n]);
     }
 }
 

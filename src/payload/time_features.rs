@@ -147,30 +147,71 @@ pub fn tile(f: &TimeFeatures, t: &Tiling, ranges: &[(f32, f32)]) -> Vec<Vec<u16>
 
 /// Inverse of [`tile`]: dequantised features from decoded images.
 pub fn untile(images: &[Vec<u16>], t: &Tiling, ranges: &[(f32, f32)]) -> TimeFeatures {
+    let value = sample_value(ranges);
     let mut f = TimeFeatures::zeros(t.n, t.keys, t.channels);
     for (k, img) in images.iter().enumerate().take(t.keys) {
         for i in 0..t.n {
             let dst = f.at_mut(i, k);
             for c in 0..t.channels {
-                dst[c] = dequantise(img[t.pixel(i, c)], ranges[c]);
+                dst[c] = value(c, img[t.pixel(i, c)]);
             }
         }
     }
     f
 }
 
+/// The features of decoded images key- and channel-major, `(K, C, N)`: column `(k, c)` is
+/// channel c's tile of key k read row by row, so each column is a few contiguous copies of
+/// image rows (no per-sample index arithmetic). `value(c, q)` dequantises sample `q` of channel
+/// c. Columns fill in parallel; every value depends on its own sample only, so the result does
+/// not depend on the thread count.
+pub fn untile_columns(
+    images: &[Vec<u16>],
+    t: &Tiling,
+    value: impl Fn(usize, u16) -> f32 + Sync,
+) -> Vec<f32> {
+    use rayon::prelude::*;
+    let mut data = vec![0f32; t.keys * t.channels * t.n];
+    data.par_chunks_mut(t.n.max(1))
+        .enumerate()
+        .for_each(|(kc, col)| {
+            let (k, c) = (kc / t.channels, kc % t.channels);
+            for (r, dst) in col.chunks_mut(t.side).enumerate() {
+                let start = t.pixel(r * t.side, c);
+                let src = &images[k][start..start + dst.len()];
+                for (d, &q) in dst.iter_mut().zip(src) {
+                    *d = value(c, q);
+                }
+            }
+        });
+    data
+}
+
+/// Codec 1 sample value (what [`untile`] stores).
+pub fn sample_value(ranges: &[(f32, f32)]) -> impl Fn(usize, u16) -> f32 + Sync + '_ {
+    move |c, q| dequantise(q, ranges[c])
+}
+
+/// Codec 2 sample value (what [`untile_reference`] stores).
+pub fn reference_sample_value((lo, hi): (f64, f64)) -> impl Fn(usize, u16) -> f32 + Sync {
+    move |_, q| {
+        let v12 = q as u32;
+        let v16 = (v12 << 4) | (v12 >> 8);
+        ((v16 as f64 / 65535.0) * (hi - lo) + lo) as f32
+    }
+}
+
 /// Codec 2 (the reference implementation's decoder, `test_fdsd.py`): each 12-bit sample `v`
 /// is expanded to 16 bits as FFmpeg's `gray16` output does (`v << 4 | v >> 8`), then
 /// `f32((v16 / 65535) * (hi - lo) + lo)` evaluated in f64 in this order.
-pub fn untile_reference(images: &[Vec<u16>], t: &Tiling, (lo, hi): (f64, f64)) -> TimeFeatures {
+pub fn untile_reference(images: &[Vec<u16>], t: &Tiling, range: (f64, f64)) -> TimeFeatures {
+    let value = reference_sample_value(range);
     let mut f = TimeFeatures::zeros(t.n, t.keys, t.channels);
     for (k, img) in images.iter().enumerate().take(t.keys) {
         for i in 0..t.n {
             let dst = f.at_mut(i, k);
             for c in 0..t.channels {
-                let v12 = img[t.pixel(i, c)] as u32;
-                let v16 = (v12 << 4) | (v12 >> 8);
-                dst[c] = ((v16 as f64 / 65535.0) * (hi - lo) + lo) as f32;
+                dst[c] = value(c, img[t.pixel(i, c)]);
             }
         }
     }
@@ -391,6 +432,37 @@ mod tests {
             let back = untile(&tile(&f, &t, &r), &t, &r);
             for (a, b) in f.data.iter().zip(&back.data) {
                 assert!((a - b).abs() <= 4.0 / 4095.0 * 0.5 + 1e-6, "{a} {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn column_untiling_is_the_row_untiling_transposed() {
+        for n in [0, 1, 7, 101, 1000] {
+            let f = feats(n);
+            let t = Tiling::for_count(n, 7, 16);
+            let r = ranges(&f, false);
+            let images = tile(&f, &t, &r);
+            for (rows, cols) in [
+                (
+                    untile(&images, &t, &r),
+                    untile_columns(&images, &t, sample_value(&r)),
+                ),
+                (
+                    untile_reference(&images, &t, (-2.0, 2.0)),
+                    untile_columns(&images, &t, reference_sample_value((-2.0, 2.0))),
+                ),
+            ] {
+                assert_eq!(cols.len(), n * 7 * 16);
+                for i in 0..n {
+                    for k in 0..7 {
+                        for c in 0..16 {
+                            let a = rows.at(i, k)[c];
+                            let b = cols[(k * 16 + c) * n + i];
+                            assert_eq!(a.to_bits(), b.to_bits(), "n {n} i {i} k {k} c {c}");
+                        }
+                    }
+                }
             }
         }
     }
