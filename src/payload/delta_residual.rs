@@ -28,7 +28,7 @@ fn encode_channel(out: &mut Vec<u8>, k: &[i32], zstd_level: i32) {
     let (codec, bits, data) = if span < 1 << 16 {
         let bits = bits_for(span);
         let q: Vec<u16> = k.iter().map(|&v| u(v) as u16).collect();
-        let (c, d) = grid_coder::encode_best(&q, grid_width(k.len()), bits, zstd_level);
+        let (c, d) = grid_coder::encode_classic(&q, grid_width(k.len()), bits, zstd_level);
         (c as u8, bits, d)
     } else {
         // Byte planes: all low bytes, then the next, ... so zstd sees runs.
@@ -131,7 +131,9 @@ fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i
             })
             .collect());
     }
+    // RDLT channels use codecs 0-2 only (3 is its own wide codec, above).
     let codec = GridCodec::from_u8(codec)
+        .filter(|c| (*c as u8) <= GridCodec::Predictive as u8)
         .ok_or_else(|| bad(format!("unknown channel codec {codec}"), at))?;
     if !(1..=16).contains(&bits) {
         return Err(bad(format!("{bits}-bit channel (1..=16)"), at));

@@ -27,6 +27,12 @@ pub enum GridCodec {
     Zstd = 1,
     /// Median predictor + context-modelled range coding.
     Predictive = 2,
+    /// The values range-coded with their own stored histogram (order 0).
+    Histogram = 3,
+    /// The difference from the previous channel's cells (mod `2^bits`, same `bits`),
+    /// range-coded with its stored histogram: colour and scale channels of one Gaussian move
+    /// together, so the difference is narrower than either.
+    HistogramDelta = 4,
 }
 
 impl GridCodec {
@@ -35,6 +41,8 @@ impl GridCodec {
             0 => Some(GridCodec::Constant),
             1 => Some(GridCodec::Zstd),
             2 => Some(GridCodec::Predictive),
+            3 => Some(GridCodec::Histogram),
+            4 => Some(GridCodec::HistogramDelta),
             _ => None,
         }
     }
@@ -296,8 +304,117 @@ pub fn decode_predictive(mut r: ByteReader, n: usize, width: usize, bits: u8) ->
     Ok(q)
 }
 
-/// Encode with whichever codec is smaller for this channel.
-pub fn encode_best(q: &[u16], width: usize, bits: u8, zstd_level: i32) -> (GridCodec, Vec<u8>) {
+/// Probability precision of the histogram codecs.
+pub const HIST_PRECISION: usize = 16;
+/// Largest alphabet of the histogram codecs.
+pub const HIST_MAX_SYMBOLS: usize = 4096;
+type HistModel = ContiguousCategoricalEntropyModel<u32, Vec<u32>, HIST_PRECISION>;
+
+/// `(q - prev) mod 2^bits` per cell: what codec 4 codes.
+pub fn delta(q: &[u16], prev: &[u16], bits: u8) -> Vec<u16> {
+    let mask = ((1u32 << bits) - 1) as u16;
+    q.iter()
+        .zip(prev)
+        .map(|(&a, &b)| a.wrapping_sub(b) & mask)
+        .collect()
+}
+
+/// Encode with the histogram codec (codec 3; codec 4 codes [`delta`] with it). `None` when the
+/// alphabet is too large.
+pub fn encode_histogram(q: &[u16], zstd_level: i32) -> Option<Vec<u8>> {
+    let symbols = (*q.iter().max()? as usize + 1).max(2);
+    if symbols > HIST_MAX_SYMBOLS {
+        return None;
+    }
+    let mut counts = vec![0u64; symbols];
+    for &v in q {
+        counts[v as usize] += 1;
+    }
+    // Every symbol gets 1 and the rest shares 2^16 - S by count, so no normalisation can
+    // underflow; the largest symbol absorbs the rounding.
+    let one = 1u64 << HIST_PRECISION;
+    let free = one - symbols as u64;
+    let total = q.len() as u64;
+    let mut p: Vec<u32> = counts
+        .iter()
+        .map(|&c| (1 + c * free / total) as u32)
+        .collect();
+    let sum: u64 = p.iter().map(|&v| v as u64).sum();
+    let imax = (0..symbols)
+        .max_by_key(|&i| (p[i], std::cmp::Reverse(i)))
+        .expect("2+ symbols");
+    p[imax] += (one - sum) as u32;
+    let model = HistModel::from_nonzero_fixed_point_probabilities(&p, false)
+        .expect("probabilities are positive and sum to 2^16");
+    let mut enc = DefaultRangeEncoder::new();
+    enc.encode_iid_symbols(q.iter().map(|&v| v as usize), &model)
+        .expect("every value is inside the model");
+    let words = enc.into_compressed().expect("in-memory backend");
+    let mut table = Vec::with_capacity(2 * symbols);
+    for &v in &p {
+        table.put_u16(v as u16);
+    }
+    let table = zstd::bulk::compress(&table, zstd_level).expect("zstd of a memory buffer");
+    let mut out = Vec::with_capacity(10 + table.len() + 4 * words.len());
+    out.put_u16(symbols as u16);
+    out.put_u32(table.len() as u32);
+    out.extend_from_slice(&table);
+    out.put_u32(words.len() as u32);
+    for w in &words {
+        out.put_u32(*w);
+    }
+    Some(out)
+}
+
+/// Decode `n` symbols coded with [`encode_histogram`] for a `bits`-bit channel.
+pub fn decode_histogram(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<u16>> {
+    let at = r.offset();
+    let symbols = r.u16("histogram symbol count")? as usize;
+    if !(2..=HIST_MAX_SYMBOLS).contains(&symbols) || symbols > 1 << bits {
+        return Err(bad(
+            &r,
+            format!("{symbols} histogram symbols for {bits}-bit values (2..=min(4096, 2^bits))"),
+        ));
+    }
+    let tlen = r.u32("histogram table length")? as usize;
+    let table = crate::bytes::zstd_exact(r.take(tlen, "histogram table")?, 2 * symbols as u64, at)?;
+    let p: Vec<u32> = table
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]) as u32)
+        .collect();
+    if p.contains(&0) || p.iter().map(|&v| v as u64).sum::<u64>() != 1 << HIST_PRECISION {
+        return Err(bad(
+            &r,
+            "histogram probabilities must be >= 1 and sum to 65536".into(),
+        ));
+    }
+    let model = HistModel::from_nonzero_fixed_point_probabilities(&p, false)
+        .map_err(|_| bad(&r, "invalid histogram model".into()))?;
+    let nwords = r.u32("range coder word count")? as usize;
+    let raw = r.take(
+        nwords
+            .checked_mul(4)
+            .ok_or_else(|| bad(&r, "word count overflows".into()))?,
+        "range coder words",
+    )?;
+    let words: Vec<u32> = raw
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect();
+    let mut dec = DefaultRangeDecoder::from_compressed(words)
+        .map_err(|_| bad(&r, "range coder stream".into()))?;
+    let mut q = Vec::with_capacity(n);
+    for i in 0..n {
+        let v = dec
+            .decode_symbol(&model)
+            .map_err(|_| bad(&r, format!("range coder failed at cell {i}")))?;
+        q.push(v as u16);
+    }
+    Ok(q)
+}
+
+/// Encode with whichever of codecs 0-2 is smaller (the codecs `RDLT` channels may use).
+pub fn encode_classic(q: &[u16], width: usize, bits: u8, zstd_level: i32) -> (GridCodec, Vec<u8>) {
     if q.iter().all(|&v| v == 0) {
         return (GridCodec::Constant, Vec::new());
     }
@@ -310,6 +427,36 @@ pub fn encode_best(q: &[u16], width: usize, bits: u8, zstd_level: i32) -> (GridC
     }
 }
 
+/// Encode with whichever codec is smaller for this channel. `prev` is the previous channel's
+/// cells when it has the same `bits` (codec 4 may then code the difference).
+pub fn encode_best(
+    q: &[u16],
+    prev: Option<&[u16]>,
+    width: usize,
+    bits: u8,
+    zstd_level: i32,
+) -> (GridCodec, Vec<u8>) {
+    let mut best = encode_classic(q, width, bits, zstd_level);
+    if best.0 == GridCodec::Constant {
+        return best;
+    }
+    let mut consider = |codec: GridCodec, data: Option<Vec<u8>>| {
+        if let Some(d) = data {
+            if d.len() < best.1.len() {
+                best = (codec, d);
+            }
+        }
+    };
+    consider(GridCodec::Histogram, encode_histogram(q, zstd_level));
+    if let Some(prev) = prev {
+        consider(
+            GridCodec::HistogramDelta,
+            encode_histogram(&delta(q, prev, bits), zstd_level),
+        );
+    }
+    best
+}
+
 pub fn encode_zstd(q: &[u16], bits: u8, level: i32) -> Vec<u8> {
     let raw: Vec<u8> = if bits <= 8 {
         q.iter().map(|&v| v as u8).collect()
@@ -319,7 +466,9 @@ pub fn encode_zstd(q: &[u16], bits: u8, level: i32) -> Vec<u8> {
     zstd::bulk::compress(&raw, level).expect("zstd compression of a memory buffer")
 }
 
-/// Decode one channel of `n` cells; every value is checked to be below `2^bits`.
+/// Decode one channel of `n` cells; every value is checked to be below `2^bits`. For
+/// [`GridCodec::HistogramDelta`] the result is the coded difference: add the previous channel
+/// with [`undo_delta`].
 pub fn decode(
     codec: GridCodec,
     r: ByteReader,
@@ -331,6 +480,7 @@ pub fn decode(
     let q = match codec {
         GridCodec::Constant => vec![0u16; n],
         GridCodec::Predictive => decode_predictive(r, n, width, bits)?,
+        GridCodec::Histogram | GridCodec::HistogramDelta => decode_histogram(r, n, bits)?,
         GridCodec::Zstd => {
             let mut r = r;
             let per = if bits <= 8 { 1 } else { 2 };
@@ -356,6 +506,14 @@ pub fn decode(
     Ok(q)
 }
 
+/// Codec 4's cells from the decoded difference and the previous channel's cells.
+pub fn undo_delta(d: &mut [u16], prev: &[u16], bits: u8) {
+    let mask = ((1u32 << bits) - 1) as u16;
+    for (v, &b) in d.iter_mut().zip(prev) {
+        *v = v.wrapping_add(b) & mask;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -364,7 +522,7 @@ mod tests {
         let e = encode_predictive(q, width, bits);
         let d = decode_predictive(ByteReader::new(&e, 0), q.len(), width, bits).unwrap();
         assert_eq!(d, q);
-        let (codec, b) = encode_best(q, width, bits, 3);
+        let (codec, b) = encode_classic(q, width, bits, 3);
         assert_eq!(
             decode(codec, ByteReader::new(&b, 0), q.len(), width, bits).unwrap(),
             q
@@ -425,5 +583,69 @@ mod tests {
             b[i] ^= 0x5a;
             let _ = decode_predictive(ByteReader::new(&b, 0), q.len(), 25, 12);
         }
+    }
+
+    #[test]
+    fn histogram_codecs_round_trip_and_reach_the_order0_entropy() {
+        let mut s = 7u32;
+        let mut rnd = || {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            s >> 8
+        };
+        // Peaked 9-bit values (like rotation components) and a channel that follows them.
+        let n = 20_000;
+        let q: Vec<u16> = (0..n)
+            .map(|_| (256 + (rnd() % 64) as i32 - (rnd() % 64) as i32) as u16)
+            .collect();
+        let follow: Vec<u16> = q.iter().map(|&v| (v + (rnd() % 5) as u16) & 511).collect();
+        let e = encode_histogram(&q, 3).expect("alphabet fits");
+        assert_eq!(decode_histogram(ByteReader::new(&e, 0), n, 9).unwrap(), q);
+        let mut counts = std::collections::HashMap::new();
+        for &v in &q {
+            *counts.entry(v).or_insert(0u64) += 1;
+        }
+        let h0: f64 = counts
+            .values()
+            .map(|&c| -(c as f64) * (c as f64 / n as f64).log2())
+            .sum();
+        let coded = e.len() as f64 * 8.0;
+        assert!(coded < h0 * 1.02 + 8.0 * 400.0, "{coded} bits vs H0 {h0}");
+        // Codec 4 through encode_best: the difference is far narrower than the values.
+        let (codec, b) = encode_best(&follow, Some(&q), 100, 9, 3);
+        assert_eq!(codec, GridCodec::HistogramDelta);
+        assert!(b.len() * 8 < n * 3, "{} bytes", b.len());
+        let mut d = decode(codec, ByteReader::new(&b, 0), n, 100, 9).unwrap();
+        undo_delta(&mut d, &q, 9);
+        assert_eq!(d, follow);
+        // Wrap-around of the modular difference, and a two-symbol alphabet.
+        let hi: Vec<u16> = vec![511; 50];
+        let lo: Vec<u16> = vec![1; 50];
+        let dd = delta(&lo, &hi, 9);
+        let mut back = decode_histogram(
+            ByteReader::new(&encode_histogram(&dd, 3).unwrap(), 0),
+            50,
+            9,
+        )
+        .unwrap();
+        undo_delta(&mut back, &hi, 9);
+        assert_eq!(back, lo);
+        // Alphabets above 4096 symbols are not offered.
+        assert!(encode_histogram(&[5000, 1], 3).is_none());
+    }
+
+    #[test]
+    fn damaged_histogram_streams_give_errors_not_panics() {
+        let q: Vec<u16> = (0..800).map(|i| ((i * 37) % 300) as u16).collect();
+        let e = encode_histogram(&q, 3).unwrap();
+        for cut in 0..e.len() {
+            assert!(decode_histogram(ByteReader::new(&e[..cut], 0), q.len(), 9).is_err());
+        }
+        for i in 0..e.len() {
+            let mut b = e.clone();
+            b[i] ^= 0x5a;
+            let _ = decode_histogram(ByteReader::new(&b, 0), q.len(), 9);
+        }
+        // More symbols than the bit depth allows.
+        assert!(decode_histogram(ByteReader::new(&e, 0), q.len(), 8).is_err());
     }
 }

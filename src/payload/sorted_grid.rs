@@ -287,15 +287,22 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
 /// Quantise and code every channel of a set, in payload order.
 fn code_set(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<Channel> {
     let w = grid_width(g.len()).max(1);
-    quantise_set(g, bits)
-        .channels
+    let chans = quantise_set(g, bits).channels;
+    (0..chans.len())
         .into_par_iter()
-        .map(|(b, min, max, q)| {
-            let (codec, data) = grid_coder::encode_best(&q, w, b, zstd_level);
+        .map(|j| {
+            let (b, min, max, q) = &chans[j];
+            // Codec 4 may code the difference from the previous channel when its bits match.
+            let prev = j
+                .checked_sub(1)
+                .map(|p| &chans[p])
+                .filter(|p| p.0 == *b)
+                .map(|p| p.3.as_slice());
+            let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
             Channel {
-                bits: b,
-                min,
-                max,
+                bits: *b,
+                min: *min,
+                max: *max,
                 codec,
                 data,
             }
@@ -407,7 +414,8 @@ fn decode_set(
         (n as u64) * 2 * kinds.len() as u64,
         at,
     )?;
-    let mut stored = Vec::with_capacity(kinds.len());
+    type Stored<'a> = (Kind, u8, GridCodec, f32, f32, &'a [u8], u64);
+    let mut stored: Vec<Stored> = Vec::with_capacity(kinds.len());
     for &k in &kinds {
         let at = r.offset();
         let bits = r.u8("CSOG channel bits")?;
@@ -418,6 +426,13 @@ fn decode_set(
         let at = r.offset();
         let codec = GridCodec::from_u8(r.u8("CSOG channel codec")?)
             .ok_or_else(|| bad_at("unknown grid codec".into(), at))?;
+        if codec == GridCodec::HistogramDelta && stored.last().is_none_or(|p: &Stored| p.1 != bits)
+        {
+            return Err(bad_at(
+                format!("{k:?}: codec 4 needs a previous channel with the same {bits} bits"),
+                at,
+            ));
+        }
         let at = r.offset();
         let (min, max) = (
             r.finite_f32("CSOG channel min")?,
@@ -434,17 +449,33 @@ fn decode_set(
         let data = r.take(len, "CSOG channel data")?;
         stored.push((k, bits, codec, min, max, data, at));
     }
+    let mut cells: Vec<Vec<u16>> = stored
+        .par_iter()
+        .map(|&(_, bits, codec, _, _, data, at)| {
+            grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits)
+        })
+        .collect::<Result<_>>()?;
+    // Codec 4 channels hold the difference from the previous channel (same bits, checked
+    // above): resolve in order.
+    for j in 1..stored.len() {
+        let (_, bits, codec, ..) = stored[j];
+        if codec != GridCodec::HistogramDelta {
+            continue;
+        }
+        let (done, rest) = cells.split_at_mut(j);
+        grid_coder::undo_delta(&mut rest[0], &done[j - 1], bits);
+    }
     let decoded: Vec<(u8, Vec<f32>)> = stored
-        .into_par_iter()
-        .map(|(k, bits, codec, min, max, data, at)| {
-            let q = grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits)?;
+        .par_iter()
+        .zip(cells)
+        .map(|(&(k, bits, _, min, max, ..), q)| {
             let v = match k {
                 Kind::RotIndex => q.iter().map(|&v| v as f32).collect(),
                 _ => q.iter().map(|&v| dequantise(v, min, max, bits)).collect(),
             };
-            Ok((bits, v))
+            (bits, v)
         })
-        .collect::<Result<_>>()?;
+        .collect();
     let mut ch = decoded.into_iter();
     let mut next = || ch.next().expect("one decoded channel per kind");
     let zip3 = |a: Vec<f32>, b: Vec<f32>, c: Vec<f32>| -> Vec<[f32; 3]> {
