@@ -6,7 +6,10 @@ use std::io::Cursor;
 
 use dlgs::container::SceneHeader;
 use dlgs::model::{Canonical, Gaussians};
-use dlgs::payload::sorted_grid::{self, dequantise, quantise_set, QuantBits, LOG_SCALE_SPAN};
+use dlgs::payload::sorted_grid::{
+    self, dequantise, quantise_set, robust_radius, QuantBits, LOG_SCALE_BELOW_RADIUS,
+    LOG_SCALE_SPAN,
+};
 use dlgs::Limits;
 use dlgs_decoder::Decoder;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
@@ -95,13 +98,19 @@ fn errors_stay_within_half_a_step() {
             "axis {a}: {worst} vs step {step}"
         );
     }
-    // Log-scales: within half a step above the floor (at most LOG_SCALE_SPAN below the max;
-    // this tile has collapsed axes near -23), raised to it below.
+    // Log-scales: within half a step above the floor (at most LOG_SCALE_SPAN below the max and
+    // LOG_SCALE_BELOW_RADIUS below ln(radius); this tile has collapsed axes near -23), raised
+    // to it below.
+    let floor = robust_radius(&g.positions).unwrap().ln() - LOG_SCALE_BELOW_RADIUS;
     for a in 0..3 {
         let (b, lo, hi, _) = q.channels[3 + a];
         assert!(
-            lo >= hi - LOG_SCALE_SPAN - 1e-4,
+            lo >= hi - LOG_SCALE_SPAN - 1e-4 && lo >= floor - 1e-4,
             "axis {a}: range {lo}..{hi}"
+        );
+        assert!(
+            lo < floor + 1e-4,
+            "axis {a}: the radius floor sets the minimum here"
         );
         let step = (hi - lo) / ((1u32 << b) - 1) as f32;
         let mut raised = 0;
