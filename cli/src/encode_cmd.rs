@@ -39,6 +39,11 @@ pub struct CodecArgs {
     /// refinement smooths colours at the cost of position coherence (BENCHMARKS.md "Grid sort").
     #[arg(long, default_value_t = 0)]
     pub sort_passes: u32,
+    /// Keep each static Gaussian's rotation as given. By default, scenes without residual GOPs
+    /// store, among the 24 (rotation, axis order) pairs that give the same ellipsoid, the one
+    /// closest to the identity: same rendering, 2-4 bits less per Gaussian.
+    #[arg(long)]
+    pub keep_orientation: bool,
     /// Store raw canonical floats without zstd.
     #[arg(long)]
     pub no_zstd: bool,
@@ -209,6 +214,7 @@ impl CodecArgs {
             } else {
                 WeightType::F16
             },
+            canonical_orientation: !self.keep_orientation,
         })
     }
 

@@ -7,6 +7,7 @@
 //! (`TFEA`, 12-bit HEVC or exact) and the deformation decoders (`MLPW`).
 
 pub mod grid_sort;
+pub mod orientation;
 pub mod synth;
 
 use std::io::Write;
@@ -149,6 +150,10 @@ pub struct EncoderConfig {
     pub lang_decoder: Option<LangDecoder>,
     /// Storage type of the language decoder's values.
     pub lang_decoder_weights: WeightType,
+    /// `CSOG` of scenes without residual GOPs: store each static Gaussian with the rotation,
+    /// among the 24 that give the same ellipsoid, closest to the identity (see
+    /// [`orientation`]). Renders the same, codes smaller.
+    pub canonical_orientation: bool,
 }
 
 impl Default for EncoderConfig {
@@ -165,6 +170,7 @@ impl Default for EncoderConfig {
             lang_decoder: None,
             // f16 halves the chunk; the relevance it changes is measured in BENCHMARKS.md.
             lang_decoder_weights: WeightType::F16,
+            canonical_orientation: true,
         }
     }
 }
@@ -343,9 +349,20 @@ impl<W: Write> StreamEncoder<W> {
                 raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?,
             ),
             CanonicalCodec::Sorted { bits, sort } => {
-                let order = grid_sort::grid_order(&canon.statics, sort);
+                // Residual GOPs add offsets to the stored rotations and scales: only scenes
+                // without them may change the representative.
+                let intra = self.writer.scene().residual_mode
+                    == dlgs::container::header::ResidualMode::Intra;
+                let oriented;
+                let statics = if intra && self.cfg.canonical_orientation {
+                    oriented = orientation::closest_to_identity(&canon.statics);
+                    &oriented
+                } else {
+                    &canon.statics
+                };
+                let order = grid_sort::grid_order(statics, sort);
                 let sorted = Canonical {
-                    statics: grid_sort::permute(&canon.statics, &order),
+                    statics: grid_sort::permute(statics, &order),
                     dynamics: canon.dynamics.clone(),
                 };
                 if first {
