@@ -6,6 +6,7 @@
 //! against what the decoder will reconstruct); and, for dynamic scenes, the key time features
 //! (`TFEA`, 12-bit HEVC or exact) and the deformation decoders (`MLPW`).
 
+pub mod bit_allocation;
 pub mod grid_sort;
 pub mod orientation;
 pub mod synth;
@@ -154,6 +155,10 @@ pub struct EncoderConfig {
     /// among the 24 that give the same ellipsoid, closest to the identity (see
     /// [`orientation`]). Renders the same, codes smaller.
     pub canonical_orientation: bool,
+    /// `CSOG` of still scenes (no dynamic Gaussians, one GOP): move up to this many bits
+    /// between attribute groups where rendering says it pays ([`bit_allocation`]); 0 = use the
+    /// bits as given.
+    pub reallocate_bits: usize,
 }
 
 impl Default for EncoderConfig {
@@ -171,6 +176,7 @@ impl Default for EncoderConfig {
             // f16 halves the chunk; the relevance it changes is measured in BENCHMARKS.md.
             lang_decoder_weights: WeightType::F16,
             canonical_orientation: true,
+            reallocate_bits: 0,
         }
     }
 }
@@ -186,6 +192,8 @@ pub struct StreamEncoder<W: Write> {
     first: Option<Canonical>,
     /// The grid order GOP 0's static set was stored in (`CSOG`), applied to later full states.
     static_order: Option<Vec<u32>>,
+    /// What [`bit_allocation::reallocate`] chose for GOP 0, when it ran.
+    allocation: Option<bit_allocation::Allocation>,
 }
 
 impl<W: Write> StreamEncoder<W> {
@@ -226,6 +234,7 @@ impl<W: Write> StreamEncoder<W> {
             previous: None,
             first: None,
             static_order: None,
+            allocation: None,
         })
     }
 
@@ -365,6 +374,19 @@ impl<W: Write> StreamEncoder<W> {
                     statics: grid_sort::permute(statics, &order),
                     dynamics: canon.dynamics.clone(),
                 };
+                let mut bits = bits;
+                let still = sorted.dynamics.is_empty() && self.writer.scene().gop_count == 1;
+                if first && still && self.cfg.reallocate_bits > 0 {
+                    let a = bit_allocation::reallocate(
+                        &sorted.statics,
+                        bits,
+                        self.cfg.zstd_level,
+                        self.cfg.reallocate_bits,
+                        |_| {},
+                    )?;
+                    bits = a.bits;
+                    self.allocation = Some(a);
+                }
                 if first {
                     self.static_order = Some(order);
                 }
@@ -430,6 +452,11 @@ impl<W: Write> StreamEncoder<W> {
         self.writer.scene()
     }
 
+    /// The bits [`EncoderConfig::reallocate_bits`] chose, when it ran.
+    pub fn allocation(&self) -> Option<&bit_allocation::Allocation> {
+        self.allocation.as_ref()
+    }
+
     pub fn finish(self) -> Result<W> {
         self.writer.finish()
     }
@@ -437,6 +464,15 @@ impl<W: Write> StreamEncoder<W> {
 
 /// Encode a single still frame (one GOP, one frame) from static Gaussians.
 pub fn encode_still<W: Write>(g: &dlgs::Gaussians, cfg: EncoderConfig, out: W) -> Result<W> {
+    encode_still_reporting(g, cfg, out).map(|(w, _)| w)
+}
+
+/// [`encode_still`], also returning what [`EncoderConfig::reallocate_bits`] chose.
+pub fn encode_still_reporting<W: Write>(
+    g: &dlgs::Gaussians,
+    cfg: EncoderConfig,
+    out: W,
+) -> Result<(W, Option<bit_allocation::Allocation>)> {
     let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     if g.has_language() {
         // DLGStream's 9-dim feature is 3 levels x 3 dims; other widths are one level.
@@ -450,7 +486,8 @@ pub fn encode_still<W: Write>(g: &dlgs::Gaussians, cfg: EncoderConfig, out: W) -
     }
     let mut enc = StreamEncoder::new(out, scene, cfg)?;
     enc.push_intra_gop(&Canonical::from_static(g.clone()))?;
-    enc.finish()
+    let allocation = enc.allocation().cloned();
+    Ok((enc.finish()?, allocation))
 }
 
 fn check_layout(canon: &Canonical, s: &SceneHeader) -> Result<()> {
