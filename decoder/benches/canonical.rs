@@ -1,0 +1,49 @@
+//! Canonical-state decoding on real data: the `CSOG` payload of the real plant scene (113,648
+//! Gaussians) at `high`, and a GENERATED binary voxel residual field (`RNTC`, the reference's
+//! shapes; no trained DLGStream model exists here) applied to that scene, 1 and 2 threads.
+//! `cargo bench -p dlgs-decoder --bench canonical`
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use dlgs::container::SceneHeader;
+use dlgs::model::ntc::NtcConfig;
+use dlgs::model::Canonical;
+use dlgs::payload::sorted_grid::{self, QuantBits};
+use dlgs::Limits;
+use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
+use dlgs_encoder::synth::synth_ntc;
+use dlgs_render::bench_scenes::plant;
+
+fn bench(c: &mut Criterion) {
+    let g = plant();
+    let sorted = permute(&g, &grid_order(&g, SortSpec::DEFAULT));
+    let canon = Canonical::from_static(sorted);
+    let payload = sorted_grid::encode(&canon, &QuantBits::HIGH, 9).unwrap();
+    let scene = SceneHeader::still(g.len() as u32, g.sh_degree);
+    let field = synth_ntc(
+        &canon,
+        &mut fastrand::Rng::with_seed(7),
+        0.01,
+        NtcConfig::default(),
+    );
+    let mut group = c.benchmark_group("canonical_plant_113k");
+    group.sample_size(20);
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        group.bench_function(format!("csog_high_decode/{threads}t"), |b| {
+            b.iter(|| {
+                pool.install(|| sorted_grid::decode(&payload, 0, &scene, &Limits::default()))
+                    .unwrap()
+            })
+        });
+        group.bench_function(format!("rntc_apply/{threads}t"), |b| {
+            b.iter(|| pool.install(|| field.apply(&canon)).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
