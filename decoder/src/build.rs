@@ -154,9 +154,8 @@ pub(crate) fn assemble(
     dynamic: Option<(PlanarFeatures, DeformMlps)>,
 ) -> DecodedGop {
     let canonical = state.canonical;
-    let deformer = dynamic.map(|(features, mlps)| {
-        Deformer::from_planar(&canonical.dynamics, features, mlps, scene.deform_model)
-    });
+    let deformer =
+        dynamic.map(|(features, mlps)| Deformer::from_planar(features, mlps, scene.deform_model));
     DecodedGop {
         index: g,
         canonical,

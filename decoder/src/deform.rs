@@ -1,10 +1,11 @@
 //! Turn a GOP's canonical dynamic Gaussians plus its deformation field into the Gaussians of
-//! one instant (format-spec §6.4). Geometry that depends only on a key is computed once per GOP;
-//! per frame only the Hermite/slerp blend and the view-dependent appearance (and language, if
+//! one instant (format-spec §6.4). Geometry that depends only on a key is computed once per GOP,
+//! the first time a frame needs that key (a seek needs 2 of the 7); per frame only the Hermite/slerp blend and the view-dependent appearance (and language, if
 //! asked) are evaluated. Work is split into fixed blocks of rows, each written in place into the
 //! output, so the result never depends on the thread count.
 
 use std::ops::Range;
+use std::sync::OnceLock;
 
 use dlgs::container::header::DeformModel;
 use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
@@ -26,17 +27,24 @@ pub struct FrameOptions {
     pub language: bool,
 }
 
-/// Per-key geometry of the reference model (§6.4), `[i * keys + k]`.
+/// Geometry of the reference model (§6.4) at one key, `[i]`.
 #[derive(Default)]
 struct KeyGeometry {
     pos: Vec<[f32; 3]>,
     tangent: Vec<[f32; 3]>,
     /// Normalised `q_c + Δq_k`.
     quat: Vec<[f32; 4]>,
-    /// `(ω, sin ω)` of the slerp from key `k` to `k + 1` (unused for the last key).
-    angle: Vec<[f32; 2]>,
     /// `Δlog-scale_k`, when the GOP applies scale offsets.
     dscale: Option<Vec<[f32; 3]>>,
+}
+
+/// The reference model's key geometry, each key (and each key pair's slerp angles) computed
+/// on first use. Every value depends only on its key, so the order keys are filled in does not
+/// change any bit.
+struct LazyGeometry {
+    keys: Vec<OnceLock<KeyGeometry>>,
+    /// `(ω, sin ω)` of the slerp from key `k` to `k + 1`, `[i]`.
+    angles: Vec<OnceLock<Vec<[f32; 2]>>>,
 }
 
 /// A GOP's deformation field, ready to produce frames.
@@ -52,7 +60,7 @@ pub struct Deformer {
     color: PanelMlp,
     lang: Option<PanelMlp>,
     scale_offsets: bool,
-    geometry: Option<KeyGeometry>,
+    geometry: Option<LazyGeometry>,
 }
 
 fn block_ranges(n: usize) -> Vec<Range<usize>> {
@@ -97,20 +105,16 @@ struct BlockOut<'a> {
 }
 
 impl Deformer {
-    /// Prepare a GOP; for the reference model, evaluates the geometry decoders on every key
-    /// (`N * K` rows).
-    pub fn new(canon: &Gaussians, gop: DynamicGop, model: DeformModel) -> Self {
-        Self::from_planar(canon, PlanarFeatures::new(&gop.features), gop.mlps, model)
+    /// Prepare a GOP; for the reference model, the geometry decoders run on a key (`N` rows)
+    /// the first time a frame needs it ([`Self::prepare_all_keys`] does all at once).
+    pub fn new(gop: DynamicGop, model: DeformModel) -> Self {
+        Self::from_planar(PlanarFeatures::new(&gop.features), gop.mlps, model)
     }
 
     /// [`Self::new`] from time features already laid out key- and channel-major.
-    pub fn from_planar(
-        canon: &Gaussians,
-        features: PlanarFeatures,
-        mlps: DeformMlps,
-        model: DeformModel,
-    ) -> Self {
+    pub fn from_planar(features: PlanarFeatures, mlps: DeformMlps, model: DeformModel) -> Self {
         let m = &mlps;
+        let keys = features.keys;
         let mut d = Deformer {
             model,
             deform: PanelMlp::new(&m.deform),
@@ -124,9 +128,47 @@ impl Deformer {
             mlps,
         };
         if model == DeformModel::Reference {
-            d.geometry = Some(d.key_geometry(canon));
+            d.geometry = Some(LazyGeometry {
+                keys: (0..keys).map(|_| OnceLock::new()).collect(),
+                angles: (0..keys.saturating_sub(1))
+                    .map(|_| OnceLock::new())
+                    .collect(),
+            });
         }
         d
+    }
+
+    /// Compute every key's geometry now (players that will show the whole GOP; a seek leaves
+    /// the keys it does not need for later).
+    pub fn prepare_all_keys(&self, canon: &Gaussians) {
+        let Some(geo) = &self.geometry else {
+            return;
+        };
+        for k in 0..geo.angles.len() {
+            self.angles(canon, k);
+        }
+        if geo.angles.is_empty() && !geo.keys.is_empty() {
+            self.key(canon, 0);
+        }
+    }
+
+    /// Key `k`'s geometry, computed on first use.
+    fn key(&self, canon: &Gaussians, k: usize) -> &KeyGeometry {
+        let geo = self.geometry.as_ref().expect("reference model");
+        geo.keys[k].get_or_init(|| self.key_geometry(canon, k))
+    }
+
+    /// Slerp angles from key `k` to `k + 1` (computing both keys if needed).
+    fn angles(&self, canon: &Gaussians, k: usize) -> &[[f32; 2]] {
+        let geo = self.geometry.as_ref().expect("reference model");
+        geo.angles[k].get_or_init(|| {
+            let (a, b) = (self.key(canon, k), self.key(canon, k + 1));
+            a.quat
+                .par_iter()
+                .zip(&b.quat)
+                .map(|(&qa, &qb)| slerp_angle(qa, qb))
+                .collect()
+        })
     }
 
     /// The time features and decoders this deformer was built from (rebuilt in the file's
@@ -142,46 +184,36 @@ impl Deformer {
         &self.features
     }
 
-    fn key_geometry(&self, canon: &Gaussians) -> KeyGeometry {
+    fn key_geometry(&self, canon: &Gaussians, k: usize) -> KeyGeometry {
         let f = self.features();
-        let keys = f.keys;
         let parts: Vec<KeyGeometry> = block_ranges(f.n)
             .into_par_iter()
             .map(|rows| {
-                let len = rows.len() * keys;
+                let len = rows.len();
                 let mut g = KeyGeometry {
                     pos: vec![[0.0; 3]; len],
                     tangent: vec![[0.0; 3]; len],
                     quat: vec![[0.0; 4]; len],
-                    angle: vec![[0.0; 2]; len],
                     dscale: self.scale_offsets.then(|| vec![[0.0; 3]; len]),
                 };
                 let mut scratch = Scratch::default();
                 let mut x = vec![[0.0; PANEL]; 12];
                 let mut o = vec![[0.0; PANEL]; self.deform.outputs()];
                 let mut c = vec![[0.0; PANEL]; self.cov.outputs()];
-                for k in 0..keys {
-                    for p in panels(rows.clone()) {
-                        f.key_panel(p.clone(), k, 0, &mut x);
-                        self.deform.run(&x, &mut scratch, &mut o);
-                        self.cov.run(&x, &mut scratch, &mut c);
-                        for (l, i) in p.enumerate() {
-                            let j = (i - rows.start) * keys + k;
-                            let pc = canon.positions[i];
-                            g.pos[j] = std::array::from_fn(|a| pc[a] + o[a][l]);
-                            g.tangent[j] = std::array::from_fn(|a| o[3 + a][l]);
-                            let q = canon.rotations[i];
-                            g.quat[j] = normalize4(std::array::from_fn(|a| q[a] + c[3 + a][l]));
-                            if let Some(ds) = &mut g.dscale {
-                                ds[j] = std::array::from_fn(|a| c[a][l]);
-                            }
+                for p in panels(rows.clone()) {
+                    f.key_panel(p.clone(), k, 0, &mut x);
+                    self.deform.run(&x, &mut scratch, &mut o);
+                    self.cov.run(&x, &mut scratch, &mut c);
+                    for (l, i) in p.enumerate() {
+                        let j = i - rows.start;
+                        let pc = canon.positions[i];
+                        g.pos[j] = std::array::from_fn(|a| pc[a] + o[a][l]);
+                        g.tangent[j] = std::array::from_fn(|a| o[3 + a][l]);
+                        let q = canon.rotations[i];
+                        g.quat[j] = normalize4(std::array::from_fn(|a| q[a] + c[3 + a][l]));
+                        if let Some(ds) = &mut g.dscale {
+                            ds[j] = std::array::from_fn(|a| c[a][l]);
                         }
-                    }
-                }
-                for r in 0..rows.len() {
-                    for k in 0..keys.saturating_sub(1) {
-                        let j = r * keys + k;
-                        g.angle[j] = slerp_angle(g.quat[j], g.quat[j + 1]);
                     }
                 }
                 g
@@ -195,7 +227,6 @@ impl Deformer {
             out.pos.extend(p.pos);
             out.tangent.extend(p.tangent);
             out.quat.extend(p.quat);
-            out.angle.extend(p.angle);
             if let (Some(o), Some(s)) = (&mut out.dscale, p.dscale) {
                 o.extend(s);
             }
@@ -260,15 +291,25 @@ impl Deformer {
                 lang: lang.next().expect("one slice per block"),
             })
             .collect();
+        let geo = match (&self.geometry, self.model) {
+            (Some(_), DeformModel::Reference) => Some((
+                self.key(canon, key),
+                self.key(canon, key + 1),
+                self.angles(canon, key),
+            )),
+            _ => None,
+        };
         jobs.into_par_iter().for_each(|mut b| {
-            self.fill_block(canon, &mut b, key, delta, opts.camera_center, language)
+            self.fill_block(canon, &mut b, geo, key, delta, opts.camera_center, language)
         });
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn fill_block(
         &self,
         canon: &Gaussians,
         out: &mut BlockOut,
+        geo: Option<(&KeyGeometry, &KeyGeometry, &[[f32; 2]])>,
         k: usize,
         d: f32,
         cam: [f32; 3],
@@ -293,17 +334,15 @@ impl Deformer {
         let mut x = vec![[0.0; PANEL]; 12];
 
         // Geometry.
-        match (&self.geometry, self.model) {
-            (Some(geo), DeformModel::Reference) => {
-                let keys = f.keys;
+        match geo {
+            Some((ga, gb, angles)) => {
                 for (r, i) in rows.clone().enumerate() {
-                    let (a, b) = (i * keys + k, i * keys + k + 1);
-                    out.pos[r] = hermite(geo.pos[a], geo.tangent[a], geo.pos[b], geo.tangent[b], d);
-                    out.rot[r] = slerp_blend(geo.quat[a], geo.quat[b], geo.angle[a], d);
-                    if let Some(ds) = &geo.dscale {
+                    out.pos[r] = hermite(ga.pos[i], ga.tangent[i], gb.pos[i], gb.tangent[i], d);
+                    out.rot[r] = slerp_blend(ga.quat[i], gb.quat[i], angles[i], d);
+                    if let Some(ds) = &ga.dscale {
                         // Key `k` only, no interpolation (the reference's eval path).
                         for c in 0..3 {
-                            out.scale[r][c] += ds[a][c];
+                            out.scale[r][c] += ds[i][c];
                         }
                     }
                 }

@@ -161,6 +161,11 @@ impl<R: Read> StreamDecoder<R> {
         }
         self.last = Some((g, state.clone()));
         let gop = build::gop(&scene, &self.limits, g, &infos, gop_at, state, &mut payload)?;
+        // A stream is played through: do all key geometry now, while the GOP is decoded,
+        // rather than on the first frame of each key interval.
+        if let Some(d) = &gop.deformer {
+            d.prepare_all_keys(&gop.canonical.dynamics);
+        }
         Ok(Arc::new(gop))
     }
 
