@@ -77,32 +77,36 @@ pub struct Allocation {
 }
 
 /// Renders the reference once and scores candidates against it.
-struct Judge<'a> {
-    g: &'a Gaussians,
+struct Judge {
+    canon: Canonical,
+    scene: dlgs::container::SceneHeader,
     cams: Vec<Camera>,
-    reference: Vec<Vec<f32>>,
+    reference: Vec<f32>,
     zstd_level: i32,
 }
 
-impl Judge<'_> {
-    fn image(&self, g: &Gaussians, cam: &Camera) -> Vec<f32> {
-        render(g, cam, &RenderOptions::default())
-            .map(|i| i.color)
-            .unwrap_or_default()
+/// All views of `g`, one after the other.
+fn images(g: &Gaussians, cams: &[Camera]) -> Result<Vec<f32>> {
+    let mut out = Vec::new();
+    for cam in cams {
+        let img = render(g, cam, &RenderOptions::default()).map_err(|e| {
+            dlgs::Error::new(
+                dlgs::ErrorKind::InvalidInput(format!("bit allocation: {e}")),
+                0,
+            )
+        })?;
+        out.extend(img.color);
     }
+    Ok(out)
+}
 
+impl Judge {
     /// Coded bytes and PSNR (over all views' pixels at once) of `bits`.
     fn score(&self, bits: &QuantBits) -> Result<(usize, f64)> {
-        let c = Canonical::from_static(self.g.clone());
-        let payload = sorted_grid::encode(&c, bits, self.zstd_level)?;
-        let scene = dlgs::container::SceneHeader::still(self.g.len() as u32, self.g.sh_degree);
-        let decoded = sorted_grid::decode(&payload, 0, &scene, &Limits::default())?.statics;
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        for (cam, reference) in self.cams.iter().zip(&self.reference) {
-            a.extend_from_slice(reference);
-            b.extend(self.image(&decoded, cam));
-        }
-        Ok((payload.len(), metrics::psnr(&a, &b)))
+        let payload = sorted_grid::encode(&self.canon, bits, self.zstd_level)?;
+        let decoded = sorted_grid::decode(&payload, 0, &self.scene, &Limits::default())?.statics;
+        let psnr = metrics::psnr(&self.reference, &images(&decoded, &self.cams)?);
+        Ok((payload.len(), psnr))
     }
 }
 
@@ -124,13 +128,13 @@ pub fn reallocate(
         ..Default::default()
     };
     let cams = orbit_cameras(g, &spec);
-    let mut judge = Judge {
-        g,
+    let judge = Judge {
+        canon: Canonical::from_static(g.clone()),
+        scene: dlgs::container::SceneHeader::still(g.len() as u32, g.sh_degree),
+        reference: images(g, &cams)?,
         cams,
-        reference: Vec::new(),
         zstd_level,
     };
-    judge.reference = judge.cams.iter().map(|c| judge.image(g, c)).collect();
     let groups: Vec<&'static str> = GROUPS
         .into_iter()
         .filter(|&n| match n {

@@ -603,6 +603,21 @@ mod tests {
     use super::*;
 
     #[test]
+    fn robust_radius_of_degenerate_sets() {
+        assert_eq!(robust_radius(&[]), None);
+        assert_eq!(
+            robust_radius(&[[1.0, 2.0, 3.0]; 5]),
+            None,
+            "all at one point"
+        );
+        assert_eq!(robust_radius(&[[f32::NAN, 0.0, 0.0]]), None);
+        // Non-finite positions are ignored; the 80th percentile distance from the median.
+        let mut p: Vec<[f32; 3]> = (0..10).map(|i| [i as f32, 0.0, 0.0]).collect();
+        p.push([f32::INFINITY, 0.0, 0.0]);
+        assert_eq!(robust_radius(&p), Some(4.0));
+    }
+
+    #[test]
     fn quaternions_survive_smallest_three() {
         for q in [
             [1.0, 0.0, 0.0, 0.0],
