@@ -208,8 +208,9 @@ impl<R: Read + Seek> Decoder<R> {
         let reader = &mut self.reader;
         let payloads = build::dynamic_payloads(&scene, &chunks, gop_at, |c| reader.payload(c))?;
         // The time features (HEVC decode) need nothing of the canonical state: decode them on
-        // a second thread while this one decodes the state (residual application). Errors are
-        // reported state first, as a sequential decode would.
+        // a second thread while this one decodes the state (residual application). Chunks that
+        // cannot be read fail first; decode errors are reported state first, as a sequential
+        // decode would. Every value depends only on its inputs, so the overlap changes no bit.
         let (state, dynamic) = std::thread::scope(|s| {
             let worker = s.spawn(|| {
                 payloads
