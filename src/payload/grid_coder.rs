@@ -397,6 +397,12 @@ pub fn decode_histogram(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<u16
             .ok_or_else(|| bad(&r, "word count overflows".into()))?,
         "range coder words",
     )?;
+    if r.remaining() != 0 {
+        return Err(bad(
+            &r,
+            format!("{} bytes after the histogram stream", r.remaining()),
+        ));
+    }
     let words: Vec<u32> = raw
         .chunks_exact(4)
         .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
@@ -647,5 +653,14 @@ mod tests {
         }
         // More symbols than the bit depth allows.
         assert!(decode_histogram(ByteReader::new(&e, 0), q.len(), 8).is_err());
+        // Bytes after the stream.
+        let mut long = e.clone();
+        long.push(0);
+        let err = decode_histogram(ByteReader::new(&long, 0), q.len(), 9).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("1 bytes after the histogram stream"),
+            "{err}"
+        );
     }
 }
