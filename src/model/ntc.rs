@@ -196,7 +196,6 @@ fn lookup<const D: usize>(
 /// L2 cache), and the gate bits as words.
 struct Tables {
     planes: Vec<Vec<u8>>,
-    gate: Vec<u8>,
     packed: Vec<Vec<u8>>,
     gate_words: Vec<u64>,
 }
@@ -255,6 +254,19 @@ fn plane_corners(
         };
     }
     (idx, w, keep)
+}
+
+/// The gate at `u`: sigmoid of the interpolated gate bit, in f64 then rounded (portable).
+fn gate_value(t: &Tables, c: &NtcConfig, u: [f32; 3]) -> f32 {
+    let mut gv = 0f32;
+    let gsum = lookup::<3>(u, c.gate_resolution, c.gate_table(), |i, w| {
+        gv += w * if t.gate_words[i / 64] >> (i % 64) & 1 == 1 {
+            1.0
+        } else {
+            -1.0
+        }
+    });
+    (1.0 / (1.0 + (-((gv / gsum) as f64)).exp())) as f32
 }
 
 impl NtcField {
@@ -341,11 +353,22 @@ impl NtcField {
             gate_words[i / 64] |= 1 << (i % 64);
         }
         Tables {
-            gate: entry_masks(&self.gate, 1),
             planes,
             packed,
             gate_words,
         }
+    }
+
+    /// The position in the unit cube of the box, or `None` outside it (or NaN) (§6.6.4).
+    fn unit_position(&self, p: [f32; 3]) -> Option<[f32; 3]> {
+        let mut u = [0f32; 3];
+        for a in 0..3 {
+            u[a] = (p[a] - self.bound_min[a]) / (self.bound_max[a] - self.bound_min[a]);
+            if !(0.0..=1.0).contains(&u[a]) {
+                return None;
+            }
+        }
+        Some(u)
     }
 
     /// [`Self::features`] for grids of at most 4 features, bit-identical to it: the same
@@ -353,23 +376,14 @@ impl NtcField {
     /// computed before any table byte is read (so the reads overlap instead of waiting on one
     /// another), nibble-packed tables and a sign table instead of per-bit branches.
     fn features_packed(&self, t: &Tables, p: [f32; 3], out: &mut [f32]) -> bool {
-        let mut u = [0f32; 3];
-        for a in 0..3 {
-            u[a] = (p[a] - self.bound_min[a]) / (self.bound_max[a] - self.bound_min[a]);
-            if !(0.0..=1.0).contains(&u[a]) {
-                return false;
-            }
-        }
+        let Some(u) = self.unit_position(p) else {
+            return false;
+        };
         let c = &self.config;
         let nf = c.features as usize;
         let lv = c.levels();
         let mask = c.table() - 1;
-        let sign = |bit: bool| if bit { 1.0f32 } else { -1.0 };
-        let mut gv = 0f32;
-        let gsum = lookup::<3>(u, c.gate_resolution, c.gate_table(), |i, w| {
-            gv += w * sign(t.gate_words[i / 64] >> (i % 64) & 1 == 1)
-        });
-        let gate = (1.0 / (1.0 + (-((gv / gsum) as f64)).exp())) as f32;
+        let gate = gate_value(t, c, u);
         const MAX: usize = 3 * 16;
         let mut idx = [[0usize; 4]; MAX];
         let mut wts = [[0f32; 4]; MAX];
@@ -413,22 +427,13 @@ impl NtcField {
 
     /// The MLP input of a position, or `None` outside the box (§6.6.3).
     fn features(&self, t: &Tables, p: [f32; 3], out: &mut [f32]) -> bool {
-        let mut u = [0f32; 3];
-        for a in 0..3 {
-            u[a] = (p[a] - self.bound_min[a]) / (self.bound_max[a] - self.bound_min[a]);
-            if !(0.0..=1.0).contains(&u[a]) {
-                return false;
-            }
-        }
+        let Some(u) = self.unit_position(p) else {
+            return false;
+        };
         let c = &self.config;
         let nf = c.features as usize;
         let sign = |bit: bool| if bit { 1.0f32 } else { -1.0 };
-        // Gate: sigmoid of the interpolated gate bit, in f64 then rounded (portable).
-        let mut gv = 0f32;
-        let gsum = lookup::<3>(u, c.gate_resolution, c.gate_table(), |i, w| {
-            gv += w * sign(t.gate[i] != 0)
-        });
-        let gate = (1.0 / (1.0 + (-((gv / gsum) as f64)).exp())) as f32;
+        let gate = gate_value(t, c, u);
         for (pi, &(a, b)) in PLANES.iter().enumerate() {
             for (l, &r) in c.resolutions.iter().enumerate() {
                 let tab = &t.planes[pi * c.levels() + l];

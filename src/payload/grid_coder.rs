@@ -217,6 +217,21 @@ fn bad(r: &ByteReader, reason: String) -> crate::Error {
     })
 }
 
+/// A word count (u32) and that many u32 LE words of a range-coded stream.
+fn read_words(r: &mut ByteReader) -> Result<Vec<u32>> {
+    let nwords = r.u32("range coder word count")? as usize;
+    let raw = r.take(
+        nwords
+            .checked_mul(4)
+            .ok_or_else(|| bad(r, "word count overflows".into()))?,
+        "range coder words",
+    )?;
+    Ok(raw
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect())
+}
+
 /// Decode `n` cells coded with [`encode_predictive`]. `r` holds exactly the channel's bytes.
 pub fn decode_predictive(mut r: ByteReader, n: usize, width: usize, bits: u8) -> Result<Vec<u16>> {
     let t0 = r.u8("grid context threshold")? as u32;
@@ -247,17 +262,7 @@ pub fn decode_predictive(mut r: ByteReader, n: usize, width: usize, bits: u8) ->
             model(&p).ok_or_else(|| bad(&r, "invalid class model".into()))?,
         ));
     }
-    let nwords = r.u32("range coder word count")? as usize;
-    let raw = r.take(
-        nwords
-            .checked_mul(4)
-            .ok_or_else(|| bad(&r, "word count overflows".into()))?,
-        "range coder words",
-    )?;
-    let words: Vec<u32> = raw
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
-        .collect();
+    let words = read_words(&mut r)?;
     let at = r.offset();
     let mantissa = BitSlice::<u8, Lsb0>::from_slice(r.rest());
     let mut mpos = 0usize;
@@ -390,23 +395,13 @@ pub fn decode_histogram(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<u16
     }
     let model = HistModel::from_nonzero_fixed_point_probabilities(&p, false)
         .map_err(|_| bad(&r, "invalid histogram model".into()))?;
-    let nwords = r.u32("range coder word count")? as usize;
-    let raw = r.take(
-        nwords
-            .checked_mul(4)
-            .ok_or_else(|| bad(&r, "word count overflows".into()))?,
-        "range coder words",
-    )?;
+    let words = read_words(&mut r)?;
     if r.remaining() != 0 {
         return Err(bad(
             &r,
             format!("{} bytes after the histogram stream", r.remaining()),
         ));
     }
-    let words: Vec<u32> = raw
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
-        .collect();
     let mut dec = DefaultRangeDecoder::from_compressed(words)
         .map_err(|_| bad(&r, "range coder stream".into()))?;
     let mut q = Vec::with_capacity(n);
