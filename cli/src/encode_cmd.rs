@@ -128,17 +128,9 @@ impl CodecArgs {
                     .ok()
                     .filter(|b| (1..=16).contains(b))
                     .with_context(|| format!("--bits {k}: `{v}` is not 1..=16"))?;
-                match k {
-                    "position" => bits.position = v,
-                    "log_scale" => bits.log_scale = v,
-                    "rotation" => bits.rotation = v,
-                    "opacity" => bits.opacity = v,
-                    "sh_dc" => bits.sh_dc = v,
-                    "sh_rest" => bits.sh_rest = v,
-                    "sh_high" => bits.sh_high = v,
-                    "lang" => bits.lang = v,
-                    _ => bail!("--bits: unknown attribute `{k}`"),
-                }
+                *bits
+                    .field_mut(k)
+                    .with_context(|| format!("--bits: unknown attribute `{k}`"))? = v;
             }
         }
         Ok(CanonicalCodec::Sorted {

@@ -30,28 +30,13 @@ const GROUPS: [&str; 7] = [
 ];
 
 fn get(b: &QuantBits, g: &str) -> u8 {
-    match g {
-        "position" => b.position,
-        "log_scale" => b.log_scale,
-        "rotation" => b.rotation,
-        "opacity" => b.opacity,
-        "sh_dc" => b.sh_dc,
-        "sh_rest" => b.sh_rest,
-        _ => b.sh_high,
-    }
+    let mut b = *b;
+    *b.field_mut(g).expect("a group name")
 }
 
 fn with(b: &QuantBits, g: &str, v: u8) -> QuantBits {
     let mut b = *b;
-    match g {
-        "position" => b.position = v,
-        "log_scale" => b.log_scale = v,
-        "rotation" => b.rotation = v,
-        "opacity" => b.opacity = v,
-        "sh_dc" => b.sh_dc = v,
-        "sh_rest" => b.sh_rest = v,
-        _ => b.sh_high = v,
-    }
+    *b.field_mut(g).expect("a group name") = v;
     b
 }
 

@@ -82,6 +82,22 @@ impl QuantBits {
             _ => None,
         }
     }
+    /// The attribute group called `name` (`position`, `log_scale`, `rotation`, `opacity`,
+    /// `sh_dc`, `sh_rest`, `sh_high`, `lang`: the `--bits` keys).
+    pub fn field_mut(&mut self, name: &str) -> Option<&mut u8> {
+        Some(match name {
+            "position" => &mut self.position,
+            "log_scale" => &mut self.log_scale,
+            "rotation" => &mut self.rotation,
+            "opacity" => &mut self.opacity,
+            "sh_dc" => &mut self.sh_dc,
+            "sh_rest" => &mut self.sh_rest,
+            "sh_high" => &mut self.sh_high,
+            "lang" => &mut self.lang,
+            _ => return None,
+        })
+    }
+
     fn all(&self) -> [u8; 8] {
         [
             self.position,
