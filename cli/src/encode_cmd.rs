@@ -44,6 +44,11 @@ pub struct CodecArgs {
     /// closest to the identity: same rendering, 2-4 bits less per Gaussian.
     #[arg(long)]
     pub keep_orientation: bool,
+    /// Keep the Gaussians no renderer draws. By default a lossy (`--quality` other than
+    /// `lossless`) still scene leaves out every Gaussian whose opacities are below 1/255: they
+    /// never reach the 1/255 alpha at which 3DGS compositing starts, so no pixel changes.
+    #[arg(long)]
+    pub keep_invisible: bool,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
     /// at no more bytes than the preset's. Each move codes and renders about 15 candidates.
@@ -212,6 +217,7 @@ impl CodecArgs {
                 WeightType::F16
             },
             canonical_orientation: !self.keep_orientation,
+            drop_invisible: !self.keep_invisible,
             reallocate_bits: self.reallocate_bits,
         })
     }
@@ -306,12 +312,18 @@ pub fn encode_file(
         } else {
             ProgressBar::hidden()
         };
-        let (_, allocation) =
+        let (_, report) =
             dlgs_encoder::encode_still_reporting(&g, codec.config(meta(input, settings))?, out)?;
         spinner.finish_and_clear();
         if verbose {
             println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
-            if let Some(a) = allocation {
+            if report.dropped_invisible > 0 {
+                println!(
+                    "  left out {} Gaussians no renderer draws (opacity below 1/255; --keep-invisible keeps them)",
+                    report.dropped_invisible
+                );
+            }
+            if let Some(a) = report.allocation {
                 for m in &a.moves {
                     println!(
                         "  moved a bit from {} to {}: {} bytes, {:.2} dB on the allocation views",

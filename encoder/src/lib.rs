@@ -8,6 +8,7 @@
 
 pub mod bit_allocation;
 pub mod grid_sort;
+pub mod invisible;
 pub mod orientation;
 pub mod synth;
 
@@ -159,6 +160,9 @@ pub struct EncoderConfig {
     /// between attribute groups where rendering says it pays ([`bit_allocation`]); 0 = use the
     /// bits as given.
     pub reallocate_bits: usize,
+    /// Lossy (`CSOG`) still scenes: leave out the Gaussians no renderer draws (both opacities
+    /// below 1/255, [`invisible`]). No pixel changes.
+    pub drop_invisible: bool,
 }
 
 impl Default for EncoderConfig {
@@ -177,6 +181,7 @@ impl Default for EncoderConfig {
             lang_decoder_weights: WeightType::F16,
             canonical_orientation: true,
             reallocate_bits: 0,
+            drop_invisible: true,
         }
     }
 }
@@ -467,12 +472,30 @@ pub fn encode_still<W: Write>(g: &dlgs::Gaussians, cfg: EncoderConfig, out: W) -
     encode_still_reporting(g, cfg, out).map(|(w, _)| w)
 }
 
-/// [`encode_still`], also returning what [`EncoderConfig::reallocate_bits`] chose.
+/// What [`encode_still_reporting`] did besides coding.
+#[derive(Debug, Clone, Default)]
+pub struct StillReport {
+    /// What [`EncoderConfig::reallocate_bits`] chose, when it ran.
+    pub allocation: Option<bit_allocation::Allocation>,
+    /// Gaussians left out because no renderer draws them ([`EncoderConfig::drop_invisible`]).
+    pub dropped_invisible: usize,
+}
+
+/// [`encode_still`], also reporting what the encoder chose.
 pub fn encode_still_reporting<W: Write>(
     g: &dlgs::Gaussians,
     cfg: EncoderConfig,
     out: W,
-) -> Result<(W, Option<bit_allocation::Allocation>)> {
+) -> Result<(W, StillReport)> {
+    let lossy = matches!(cfg.canonical, CanonicalCodec::Sorted { .. });
+    let pruned;
+    let (g, dropped_invisible) = if lossy && cfg.drop_invisible {
+        let (kept, dropped) = invisible::drop_never_drawn(g);
+        pruned = kept;
+        (&pruned, dropped)
+    } else {
+        (g, 0)
+    };
     let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     if g.has_language() {
         // DLGStream's 9-dim feature is 3 levels x 3 dims; other widths are one level.
@@ -486,8 +509,11 @@ pub fn encode_still_reporting<W: Write>(
     }
     let mut enc = StreamEncoder::new(out, scene, cfg)?;
     enc.push_intra_gop(&Canonical::from_static(g.clone()))?;
-    let allocation = enc.allocation().cloned();
-    Ok((enc.finish()?, allocation))
+    let report = StillReport {
+        allocation: enc.allocation().cloned(),
+        dropped_invisible,
+    };
+    Ok((enc.finish()?, report))
 }
 
 fn check_layout(canon: &Canonical, s: &SceneHeader) -> Result<()> {

@@ -41,40 +41,8 @@ pub fn rasterize(
     lang: Option<(&[f32], usize)>,
 ) -> Accum {
     let tiles_x = width.div_ceil(TILE) as usize;
-    let tiles_y = height.div_ceil(TILE) as usize;
-    // Sort by depth (positive finite floats sort like their bit patterns), ties by position.
-    let mut order: Vec<u64> = splats
-        .iter()
-        .enumerate()
-        .map(|(k, s)| ((s.depth.to_bits() as u64) << 32) | k as u64)
-        .collect();
-    order.par_sort_unstable();
-    // Tile rows -> splats touching that row, in depth order.
-    let mut rows: Vec<Vec<u32>> = vec![Vec::new(); tiles_y];
-    for key in &order {
-        let k = (*key & 0xffff_ffff) as u32;
-        let t = splats[k as usize].tiles;
-        for row in &mut rows[t[1] as usize..t[3] as usize] {
-            row.push(k);
-        }
-    }
+    let tile_lists = bin_tiles(splats, width, height);
     let lw = lang.map_or(0, |(_, w)| w);
-    // Tile lists, built per tile row in parallel, then every tile composited in parallel
-    // (finer than rows, so a few heavy rows do not leave a core idle).
-    let tile_lists: Vec<Vec<u32>> = rows
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(ty, row)| {
-            let mut lists: Vec<Vec<u32>> = vec![Vec::new(); tiles_x];
-            for &k in row {
-                let (a, b) = band_tiles(&splats[k as usize], ty as u32);
-                for list in &mut lists[a..b] {
-                    list.push(k);
-                }
-            }
-            lists
-        })
-        .collect();
     let pairs = tile_lists.iter().map(Vec::len).sum();
     let outs: Vec<TileOut> = tile_lists
         .par_iter()
@@ -121,6 +89,43 @@ pub fn rasterize(
         }
     }
     acc
+}
+
+/// Per tile (row-major), the splats that reach it, in (depth, index) order.
+pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
+    let tiles_x = width.div_ceil(TILE) as usize;
+    let tiles_y = height.div_ceil(TILE) as usize;
+    // Sort by depth (positive finite floats sort like their bit patterns), ties by position.
+    let mut order: Vec<u64> = splats
+        .iter()
+        .enumerate()
+        .map(|(k, s)| ((s.depth.to_bits() as u64) << 32) | k as u64)
+        .collect();
+    order.par_sort_unstable();
+    // Tile rows -> splats touching that row, in depth order.
+    let mut rows: Vec<Vec<u32>> = vec![Vec::new(); tiles_y];
+    for key in &order {
+        let k = (*key & 0xffff_ffff) as u32;
+        let t = splats[k as usize].tiles;
+        for row in &mut rows[t[1] as usize..t[3] as usize] {
+            row.push(k);
+        }
+    }
+    // Tile lists, built per tile row in parallel, then every tile composited in parallel
+    // (finer than rows, so a few heavy rows do not leave a core idle).
+    rows.par_iter()
+        .enumerate()
+        .flat_map_iter(|(ty, row)| {
+            let mut lists: Vec<Vec<u32>> = vec![Vec::new(); tiles_x];
+            for &k in row {
+                let (a, b) = band_tiles(&splats[k as usize], ty as u32);
+                for list in &mut lists[a..b] {
+                    list.push(k);
+                }
+            }
+            lists
+        })
+        .collect()
 }
 
 /// Tiles `[a, b)` of tile row `ty` that the splat's ellipse really reaches: its bounding box

@@ -402,8 +402,10 @@ fn bit_reallocation_buys_quality_at_no_more_bytes() {
         reallocate_bits: 4,
         ..Default::default()
     };
-    let (bytes, a) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
-    let a = a.expect("a still scene with reallocate_bits runs the allocator");
+    let (bytes, report) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
+    let a = report
+        .allocation
+        .expect("a still scene with reallocate_bits runs the allocator");
     println!("{a:?}");
     assert!(a.bytes <= a.start_bytes, "{} > {}", a.bytes, a.start_bytes);
     assert!(
@@ -432,4 +434,46 @@ fn bit_reallocation_buys_quality_at_no_more_bytes() {
     assert_eq!(total(&a.bits), total(&QuantBits::MEDIUM));
     // The file holds what was chosen: its CSOG payload is within a header of the allocator's.
     assert!(bytes.len() >= a.bytes && bytes.len() < a.bytes + 4096);
+}
+
+#[test]
+fn never_drawn_gaussians_are_left_out_without_changing_a_pixel() {
+    // Real Mip-Splatting donut (45,624 Gaussians), 3.3 % of them with opacity below 1/255.
+    let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
+    let (kept, dropped) = dlgs_encoder::invisible::drop_never_drawn(&g);
+    assert_eq!(dropped, 1518, "measured on the donut");
+    let spec = OrbitSpec {
+        width: 320,
+        height: 240,
+        count: 3,
+        ..Default::default()
+    };
+    for cam in orbit_cameras(&g, &spec) {
+        let a = render(&g, &cam, &RenderOptions::default()).unwrap();
+        let b = render(&kept, &cam, &RenderOptions::default()).unwrap();
+        assert_eq!(a.color, b.color, "camera {}", cam.name);
+    }
+    let encode = |drop_invisible: bool| {
+        let cfg = EncoderConfig {
+            canonical: CanonicalCodec::Sorted {
+                bits: QuantBits::MEDIUM,
+                sort: SortSpec::DEFAULT,
+            },
+            drop_invisible,
+            ..Default::default()
+        };
+        let (bytes, report) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
+        let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
+        let n = dec.gop_canonical(0).unwrap().statics.len();
+        (bytes.len(), report.dropped_invisible, n)
+    };
+    let (all_bytes, none_dropped, all_n) = encode(false);
+    let (pruned_bytes, pruned, pruned_n) = encode(true);
+    println!("all {all_bytes} B, without the never-drawn {pruned_bytes} B");
+    assert_eq!((none_dropped, all_n), (0, g.len()));
+    assert_eq!((pruned, pruned_n), (dropped, g.len() - dropped));
+    assert!(
+        (pruned_bytes as f64) < all_bytes as f64 * 0.975,
+        "{pruned_bytes} vs {all_bytes}"
+    );
 }

@@ -1,0 +1,153 @@
+//! How much each Gaussian adds to the colour images of a set of views: the sum over pixels of
+//! its blending weight `a T` (the compositing rule of [`crate::raster`]). A Gaussian whose total
+//! is small can be dropped with little change to those views (LightGaussian's "global
+//! significance"); one with zero total is never drawn by them.
+//!
+//! Scalar and per tile, so it is exact to the rule rather than fast; tiles are summed in tile
+//! order, so the result does not depend on the thread count.
+
+use rayon::prelude::*;
+
+use crate::camera::Camera;
+use crate::fastexp::exp_neg;
+use crate::project::{project_all, Splat2d, ALPHA_MIN, TILE};
+use crate::raster::{bin_tiles, ALPHA_MAX, T_MIN};
+use dlgs::Gaussians;
+
+/// Per Gaussian, its blending weight summed over every pixel of every view (in pixels).
+pub fn contributions(g: &Gaussians, cams: &[Camera]) -> Vec<f64> {
+    let mut total = vec![0.0f64; g.len()];
+    for cam in cams {
+        let splats = project_all(g, cam, false);
+        let tiles_x = cam.width.div_ceil(TILE) as usize;
+        let lists = bin_tiles(&splats, cam.width, cam.height);
+        let per_tile: Vec<Vec<f64>> = lists
+            .par_iter()
+            .enumerate()
+            .map(|(i, list)| {
+                let x0 = (i % tiles_x) as u32 * TILE;
+                let y0 = (i / tiles_x) as u32 * TILE;
+                let w = (cam.width - x0).min(TILE);
+                let h = (cam.height - y0).min(TILE);
+                tile_weights(&splats, list, x0, y0, w, h)
+            })
+            .collect();
+        for (list, weights) in lists.iter().zip(per_tile) {
+            for (&k, wgt) in list.iter().zip(weights) {
+                total[splats[k as usize].index as usize] += wgt;
+            }
+        }
+    }
+    total
+}
+
+/// Blending weight of each splat of `list` over the tile's pixels, in list order.
+fn tile_weights(splats: &[Splat2d], list: &[u32], x0: u32, y0: u32, w: u32, h: u32) -> Vec<f64> {
+    let mut t = vec![1.0f32; (w * h) as usize];
+    let mut out = vec![0.0f64; list.len()];
+    for (slot, &k) in out.iter_mut().zip(list) {
+        let s = &splats[k as usize];
+        let [ca, cb, cc] = s.conic;
+        let xs = (s.px[0] as u32).max(x0)..(s.px[2] as u32).min(x0 + w);
+        let ys = (s.px[1] as u32).max(y0)..(s.px[3] as u32).min(y0 + h);
+        let mut sum = 0.0f32;
+        for y in ys {
+            let dy = y as f32 - s.mean[1];
+            for x in xs.clone() {
+                let p = ((y - y0) * w + (x - x0)) as usize;
+                if t[p] < T_MIN {
+                    continue;
+                }
+                let dx = x as f32 - s.mean[0];
+                let power = (-0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy).min(0.0);
+                let a = (s.opacity * exp_neg(power)).min(ALPHA_MAX);
+                if a < ALPHA_MIN {
+                    continue;
+                }
+                let next = t[p] * (1.0 - a);
+                if next < T_MIN {
+                    // The pixel is finished; this Gaussian is not added (the raster rule).
+                    t[p] = 0.0;
+                    continue;
+                }
+                sum += a * t[p];
+                t[p] = next;
+            }
+        }
+        *slot = sum as f64;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::{orbit_cameras, OrbitSpec};
+
+    fn blob(n: usize) -> Gaussians {
+        let mut g = Gaussians::new(0, 0);
+        for i in 0..n {
+            let f = i as f32 / n as f32;
+            g.positions
+                .push([f - 0.5, (f * 7.0).sin() * 0.3, (f * 3.0).cos() * 0.3]);
+            g.log_scales.push([-3.0; 3]);
+            g.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity.push(2.0);
+            g.sh.extend_from_slice(&[0.5, 0.2, 0.1]);
+        }
+        g
+    }
+
+    #[test]
+    fn invisible_gaussians_contribute_nothing_and_totals_match_the_image() {
+        let mut g = blob(200);
+        g.opacity[7] = -8.0; // sigmoid < 1/255: never drawn
+        let spec = OrbitSpec {
+            count: 3,
+            width: 96,
+            height: 72,
+            ..OrbitSpec::default()
+        };
+        let cams = orbit_cameras(&g, &spec);
+        let c = contributions(&g, &cams);
+        assert_eq!(c[7], 0.0);
+        assert!(c.iter().filter(|&&v| v > 0.0).count() > 150);
+        // Sum of weights = drawn coverage = pixels * (1 - transmittance), per view.
+        let covered: f64 = cams
+            .iter()
+            .map(|cam| {
+                let img = crate::render(&g, cam, &Default::default()).unwrap();
+                img.transmittance
+                    .iter()
+                    .map(|&t| 1.0 - t as f64)
+                    .sum::<f64>()
+            })
+            .sum();
+        let total: f64 = c.iter().sum();
+        assert!(
+            (total - covered).abs() < 1e-3 * covered,
+            "{total} vs {covered}"
+        );
+    }
+
+    #[test]
+    fn same_result_on_any_thread_count() {
+        let g = blob(300);
+        let cams = orbit_cameras(
+            &g,
+            &OrbitSpec {
+                count: 2,
+                width: 64,
+                height: 48,
+                ..OrbitSpec::default()
+            },
+        );
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let a = one.install(|| contributions(&g, &cams));
+        let b = contributions(&g, &cams);
+        assert_eq!(a, b);
+    }
+}
