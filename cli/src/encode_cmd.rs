@@ -69,6 +69,11 @@ pub struct CodecArgs {
     /// Lossless HEVC: the 12-bit quantised features exactly.
     #[arg(long)]
     pub lossless_features: bool,
+    /// Code every time-feature key as its own intra picture (`TFEA` codec 3), so a seek decodes
+    /// the 2 keys around t instead of the GOP's 7. Bytes and error at the same crf, and the
+    /// seek time it buys, are in BENCHMARKS.md ("Seeking").
+    #[arg(long)]
+    pub intra_features: bool,
     /// Store time features as exact f32 (zstd) instead of HEVC.
     #[arg(long)]
     pub exact_features: bool,
@@ -201,6 +206,7 @@ impl CodecArgs {
                     crf: self.crf,
                     preset: self.preset.clone(),
                     lossless: self.lossless_features,
+                    intra_only: self.intra_features,
                 })
             },
             per_gop_range: self.per_gop_range,
@@ -372,7 +378,10 @@ pub fn encode_file(
             (Some(f), true) => GopCanonical::Ntc(f),
             _ => GopCanonical::State(&gop.canonical),
         };
-        enc.push(canonical, gop.dynamic().as_ref())
+        let dynamic = gop
+            .dynamic()
+            .with_context(|| format!("decoding GOP {g}'s time features"))?;
+        enc.push(canonical, dynamic.as_ref())
             .with_context(|| format!("encoding GOP {g}"))?;
         pb.inc(1);
     }

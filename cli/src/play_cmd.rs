@@ -205,7 +205,8 @@ fn play_loop(
         }
         let g = gop.as_ref().expect("set above");
         let t0 = Instant::now();
-        let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer));
+        let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer))
+            .with_context(|| format!("decoding frame {f}"))?;
         decode_ms.push(t0.elapsed().as_secs_f64() * 1e3);
         buffer = frame.dynamics;
         r.shown += 1;

@@ -1,5 +1,6 @@
 //! Seek latency on a >= 250k-Gaussian scene, both residual modes:
-//! `cargo run --release -p dlgs-decoder --example seek_timing [-- --features exact|hevc]`.
+//! `cargo run --release -p dlgs-decoder --example seek_timing [-- exact | intra]` (`intra`:
+//! intra-only HEVC time features, `TFEA` codec 3, written to target/seek-{mode}-intra.dlgs).
 //!
 //! The scene is the 272,920-Gaussian side-by-side capture of `dlgs_render::bench_scenes::big`
 //! (real scenes), made dynamic by the SYNTHETIC generator (30 % dynamic) over 5 GOPs of 60
@@ -20,6 +21,7 @@ use dlgs_render::bench_scenes::big;
 
 fn main() {
     let hevc = !std::env::args().any(|a| a == "exact");
+    let intra = std::env::args().any(|a| a == "intra");
     let scene = big();
     let target = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../target");
     for mode in [ResidualMode::Parallel, ResidualMode::Sequential] {
@@ -32,21 +34,29 @@ fn main() {
         let m = synth_dynamic(&scene, &spec).unwrap();
         let cfg = EncoderConfig {
             features: if hevc {
-                FeatureCodec::Hevc(HevcSettings::default())
+                FeatureCodec::Hevc(HevcSettings {
+                    intra_only: intra,
+                    ..Default::default()
+                })
             } else {
                 FeatureCodec::Exact
             },
             ..Default::default()
         };
         let bytes = write_model(&m, cfg, Vec::new()).unwrap();
-        let path = target.join(format!("seek-{mode:?}.dlgs").to_lowercase());
+        let suffix = if intra { "-intra" } else { "" };
+        let path = target.join(format!("seek-{mode:?}{suffix}.dlgs").to_lowercase());
         std::fs::write(&path, &bytes).unwrap();
         println!(
             "{mode:?}: {} static + {} dynamic, {} bytes ({} features), built in {:.1} s -> {}",
             m.scene.n_static,
             m.scene.n_dynamic,
             bytes.len(),
-            if hevc { "HEVC crf 6" } else { "exact" },
+            match (hevc, intra) {
+                (true, false) => "HEVC crf 6",
+                (true, true) => "intra-only HEVC crf 6",
+                _ => "exact",
+            },
             t0.elapsed().as_secs_f64(),
             path.display()
         );

@@ -5,13 +5,13 @@ use std::sync::Arc;
 
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader};
 use dlgs::model::DeformMlps;
-use dlgs::payload::time_features::{self, TfeaBody};
+use dlgs::payload::time_features::{self, TfeaBody, Tiling};
 use dlgs::payload::{
     decode_canonical, decode_residual, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
 };
 use dlgs::{Error, ErrorKind, Limits, Result};
 
-use crate::planar::PlanarFeatures;
+use crate::planar::{KeySource, PlanarFeatures};
 use crate::{DecodedGop, Deformer, State};
 
 fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
@@ -116,8 +116,26 @@ pub(crate) fn decode_dynamic(
         TfeaBody::Hevc {
             tiling,
             ranges,
+            reference: None,
+            packets,
+            intra: true,
+        } => PlanarFeatures::per_key(
+            tiling.n,
+            tiling.keys,
+            tiling.channels,
+            Arc::new(IntraKeys {
+                tiling,
+                ranges,
+                packets,
+                at,
+            }),
+        ),
+        TfeaBody::Hevc {
+            tiling,
+            ranges,
             reference,
             packets,
+            ..
         } => {
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
             let video = dlgs_video::decode_gray12(
@@ -144,6 +162,34 @@ pub(crate) fn decode_dynamic(
     };
     let mlps = mlp_weights::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
     Ok((features, mlps))
+}
+
+/// Intra-only HEVC time features (`TFEA` codec 3): packet `k` is key `k`'s picture alone.
+struct IntraKeys {
+    tiling: Tiling,
+    ranges: Vec<(f32, f32)>,
+    packets: Vec<Vec<u8>>,
+    /// Offset of the `TFEA` payload, for errors.
+    at: u64,
+}
+
+impl KeySource for IntraKeys {
+    fn key(&self, k: usize) -> Result<Vec<f32>> {
+        let t = &self.tiling;
+        let video = dlgs_video::decode_gray12(
+            &[self.packets[k].as_slice()],
+            t.width() as u32,
+            t.height() as u32,
+            1,
+        )
+        .map_err(|e| video_error(e, self.at))?;
+        let one = Tiling { keys: 1, ..*t };
+        Ok(time_features::untile_columns(
+            &video.frames,
+            &one,
+            time_features::sample_value(&self.ranges),
+        ))
+    }
 }
 
 /// GOP `g` from its decoded canonical `state` and its decoded time features and decoders.

@@ -9,6 +9,7 @@ use std::sync::OnceLock;
 
 use dlgs::container::header::DeformModel;
 use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
+use dlgs::Result;
 use rayon::prelude::*;
 
 use crate::interp::{hermite, normalize4, slerp_angle, slerp_blend};
@@ -140,9 +141,10 @@ impl Deformer {
 
     /// Compute every key's geometry now (players that will show the whole GOP; a seek leaves
     /// the keys it does not need for later).
-    pub fn prepare_all_keys(&self, canon: &Gaussians) {
+    pub fn prepare_all_keys(&self, canon: &Gaussians) -> Result<()> {
+        self.features.ensure_keys(0..self.features.keys)?;
         let Some(geo) = &self.geometry else {
-            return;
+            return Ok(());
         };
         for k in 0..geo.angles.len() {
             self.angles(canon, k);
@@ -150,6 +152,7 @@ impl Deformer {
         if geo.angles.is_empty() && !geo.keys.is_empty() {
             self.key(canon, 0);
         }
+        Ok(())
     }
 
     /// Key `k`'s geometry, computed on first use.
@@ -173,11 +176,16 @@ impl Deformer {
 
     /// The time features and decoders this deformer was built from (rebuilt in the file's
     /// `(N, K, C)` layout).
-    pub fn dynamic_gop(&self) -> DynamicGop {
-        DynamicGop {
-            features: self.features.to_time_features(),
+    pub fn dynamic_gop(&self) -> Result<DynamicGop> {
+        Ok(DynamicGop {
+            features: self.features.to_time_features()?,
             mlps: self.mlps.clone(),
-        }
+        })
+    }
+
+    /// Time-feature keys decoded so far (intra-only features decode the keys frames need).
+    pub fn loaded_keys(&self) -> usize {
+        self.features.loaded_keys()
     }
 
     fn features(&self) -> &PlanarFeatures {
@@ -241,10 +249,10 @@ impl Deformer {
         key: usize,
         delta: f32,
         opts: &FrameOptions,
-    ) -> Gaussians {
+    ) -> Result<Gaussians> {
         let mut out = Gaussians::new(canon.sh_degree, canon.lang_width);
-        self.frame_into(canon, key, delta, opts, &mut out);
-        out
+        self.frame_into(canon, key, delta, opts, &mut out)?;
+        Ok(out)
     }
 
     /// Like [`Self::frame`], reusing `out`'s allocations (a player's frame buffer).
@@ -255,7 +263,9 @@ impl Deformer {
         delta: f32,
         opts: &FrameOptions,
         out: &mut Gaussians,
-    ) {
+    ) -> Result<()> {
+        // The two keys the frame interpolates (decoded now if the features are per key).
+        self.features.ensure_keys(key..key + 2)?;
         let n = self.features().n;
         let language = opts.language && self.lang.is_some() && canon.has_language();
         out.sh_degree = canon.sh_degree;
@@ -302,6 +312,7 @@ impl Deformer {
         jobs.into_par_iter().for_each(|mut b| {
             self.fill_block(canon, &mut b, geo, key, delta, opts.camera_center, language)
         });
+        Ok(())
     }
 
     #[allow(clippy::too_many_arguments)]

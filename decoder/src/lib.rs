@@ -87,29 +87,33 @@ impl StateCache {
 
 impl DecodedGop {
     /// The Gaussians of this GOP at `time` (located in this GOP), written into the buffers
-    /// of `reuse`.
+    /// of `reuse`. Fails only where intra-only time features decode a key for the first time
+    /// and its picture is damaged.
     pub fn frame(
         gop: &Arc<DecodedGop>,
         time: TimePoint,
         opts: &FrameOptions,
         mut reuse: Gaussians,
-    ) -> Frame {
+    ) -> Result<Frame> {
         let canon = &gop.canonical.dynamics;
         match &gop.deformer {
-            Some(d) => d.frame_into(canon, time.key, time.delta, opts, &mut reuse),
+            Some(d) => d.frame_into(canon, time.key, time.delta, opts, &mut reuse)?,
             None => reuse.clone_from(canon),
         }
-        Frame {
+        Ok(Frame {
             time,
             gop: gop.clone(),
             dynamics: reuse,
-        }
+        })
     }
 
     /// The GOP's time features and decoders, if the scene has dynamic Gaussians (rebuilt from
     /// the deformer's layout; for re-encoding and inspection, not per frame).
-    pub fn dynamic(&self) -> Option<DynamicGop> {
-        self.deformer.as_ref().map(Deformer::dynamic_gop)
+    pub fn dynamic(&self) -> Result<Option<DynamicGop>> {
+        self.deformer
+            .as_ref()
+            .map(Deformer::dynamic_gop)
+            .transpose()
     }
 }
 
@@ -194,8 +198,15 @@ impl<R: Read + Seek> Decoder<R> {
         chunks.iter().find(|c| c.ty == ty).copied()
     }
 
-    /// Decode GOP `g`: canonical Gaussians, time features and decoders (cached).
+    /// Decode GOP `g`: canonical Gaussians, time features and decoders (cached). Intra-only
+    /// time features (`TFEA` codec 3) decode each key when a frame first needs it.
     pub fn gop(&mut self, g: u32) -> Result<Arc<DecodedGop>> {
+        self.gop_for_keys(g, 0..0)
+    }
+
+    /// [`Self::gop`], decoding the time-feature keys of `keys` alongside the canonical state
+    /// (all keys are decoded anyway unless the features are intra-only).
+    fn gop_for_keys(&mut self, g: u32, keys: std::ops::Range<usize>) -> Result<Arc<DecodedGop>> {
         if let Some(c) = &self.cached {
             if c.index == g {
                 return Ok(c.clone());
@@ -213,10 +224,14 @@ impl<R: Read + Seek> Decoder<R> {
         // decode would. Every value depends only on its inputs, so the overlap changes no bit.
         let (state, dynamic) = std::thread::scope(|s| {
             let worker = s.spawn(|| {
-                payloads
+                let dynamic = payloads
                     .as_ref()
                     .map(|p| build::decode_dynamic(&scene, &limits, p))
-                    .transpose()
+                    .transpose()?;
+                if let Some((features, _)) = &dynamic {
+                    features.ensure_keys(keys)?;
+                }
+                Ok(dynamic)
             });
             let state = self.state(g);
             let dynamic = worker
@@ -309,7 +324,7 @@ impl<R: Read + Seek> Decoder<R> {
         reuse: Gaussians,
     ) -> Result<Frame> {
         let time = self.scene().locate(t)?;
-        let gop = self.gop(time.gop)?;
-        Ok(DecodedGop::frame(&gop, time, opts, reuse))
+        let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        DecodedGop::frame(&gop, time, opts, reuse)
     }
 }

@@ -4,19 +4,49 @@
 //! streams the hardware prefetcher follows. (The file and the reference keep `(N, K, C)`.)
 
 use std::ops::Range;
+use std::sync::{Arc, OnceLock};
 
 use dlgs::model::TimeFeatures;
+use dlgs::Result;
+use rayon::prelude::*;
 
 use crate::interp::lerp;
 use crate::panel::{Lane, PANEL};
 
-#[derive(Debug, Clone)]
+/// Decodes one key's features, `(C, N)` column-major, on demand (intra-only HEVC time
+/// features: each key is its own picture).
+pub trait KeySource: Send + Sync {
+    fn key(&self, k: usize) -> Result<Vec<f32>>;
+}
+
+#[derive(Clone)]
+enum Store {
+    /// `data[(k * channels + c) * n + i]`.
+    Whole(Vec<f32>),
+    /// Key `k`'s `(C, N)` block in `slots[k]`, decoded from `source` when first needed.
+    PerKey {
+        slots: Vec<OnceLock<Vec<f32>>>,
+        source: Arc<dyn KeySource>,
+    },
+}
+
+#[derive(Clone)]
 pub struct PlanarFeatures {
     pub n: usize,
     pub keys: usize,
     pub channels: usize,
-    /// `data[(k * channels + c) * n + i]`.
-    data: Vec<f32>,
+    store: Store,
+}
+
+impl std::fmt::Debug for PlanarFeatures {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PlanarFeatures")
+            .field("n", &self.n)
+            .field("keys", &self.keys)
+            .field("channels", &self.channels)
+            .field("loaded_keys", &self.loaded_keys())
+            .finish()
+    }
 }
 
 impl PlanarFeatures {
@@ -27,7 +57,54 @@ impl PlanarFeatures {
             n,
             keys,
             channels,
-            data,
+            store: Store::Whole(data),
+        }
+    }
+
+    /// Features whose keys are decoded by `source` when first needed ([`Self::ensure_keys`]).
+    pub fn per_key(n: usize, keys: usize, channels: usize, source: Arc<dyn KeySource>) -> Self {
+        PlanarFeatures {
+            n,
+            keys,
+            channels,
+            store: Store::PerKey {
+                slots: (0..keys).map(|_| OnceLock::new()).collect(),
+                source,
+            },
+        }
+    }
+
+    /// Decode the keys of `range` not decoded yet (in parallel). Every reader of a key calls
+    /// this first; a key that fails to decode is an error here, never later.
+    pub fn ensure_keys(&self, range: Range<usize>) -> Result<()> {
+        let Store::PerKey { slots, source } = &self.store else {
+            return Ok(());
+        };
+        let range = range.start.min(self.keys)..range.end.min(self.keys);
+        let missing: Vec<usize> = range.filter(|&k| slots[k].get().is_none()).collect();
+        let decoded: Vec<(usize, Vec<f32>)> = missing
+            .into_par_iter()
+            .map(|k| source.key(k).map(|v| (k, v)))
+            .collect::<Result<_>>()?;
+        for (k, v) in decoded {
+            let want = self.channels * self.n;
+            if v.len() != want {
+                panic!(
+                    "key source gave {} values for key {k}, want {want}",
+                    v.len()
+                );
+            }
+            // Another thread may have filled it first with the same values.
+            let _ = slots[k].set(v);
+        }
+        Ok(())
+    }
+
+    /// Keys decoded so far (all of them for features decoded as a whole).
+    pub fn loaded_keys(&self) -> usize {
+        match &self.store {
+            Store::Whole(_) => self.keys,
+            Store::PerKey { slots, .. } => slots.iter().filter(|s| s.get().is_some()).count(),
         }
     }
 
@@ -43,25 +120,36 @@ impl PlanarFeatures {
             n,
             keys,
             channels: ch,
-            data,
+            store: Store::Whole(data),
         }
     }
 
-    /// Back to the file's `(N, K, C)` layout.
-    pub fn to_time_features(&self) -> TimeFeatures {
-        let (n, kc) = (self.n, self.keys * self.channels);
-        let mut f = TimeFeatures::zeros(n, self.keys, self.channels);
+    /// Back to the file's `(N, K, C)` layout (decodes every key).
+    pub fn to_time_features(&self) -> Result<TimeFeatures> {
+        self.ensure_keys(0..self.keys)?;
+        let (n, ch) = (self.n, self.channels);
+        let mut f = TimeFeatures::zeros(n, self.keys, ch);
+        let kc = self.keys * ch;
         for (i, row) in f.data.chunks_exact_mut(kc).enumerate() {
             for (j, v) in row.iter_mut().enumerate() {
-                *v = self.data[j * n + i];
+                *v = self.column(j / ch, j % ch, i..i + 1)[0];
             }
         }
-        f
+        Ok(f)
     }
 
     fn column(&self, k: usize, c: usize, rows: Range<usize>) -> &[f32] {
-        let o = (k * self.channels + c) * self.n;
-        &self.data[o + rows.start..o + rows.end]
+        let (block, o) = match &self.store {
+            Store::Whole(data) => (data.as_slice(), (k * self.channels + c) * self.n),
+            Store::PerKey { slots, .. } => (
+                slots[k]
+                    .get()
+                    .expect("ensure_keys runs before a key is read")
+                    .as_slice(),
+                c * self.n,
+            ),
+        };
+        &block[o + rows.start..o + rows.end]
     }
 
     /// Panel columns `x[j] = lerp(F_k, F_k+1, δ)[c0 + j]` over `rows` (zero past the end).
@@ -102,7 +190,7 @@ mod tests {
             *v = j as f32 * 0.25 - 3.0;
         }
         let p = PlanarFeatures::new(&f);
-        assert_eq!(p.to_time_features(), f);
+        assert_eq!(p.to_time_features().unwrap(), f);
         let mut x = vec![[0.0; PANEL]; 3];
         for rows in [0..16, 16..32, 32..37] {
             p.lerp_panel(rows.clone(), 1, 0.25, 2, &mut x);

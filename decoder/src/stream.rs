@@ -164,7 +164,7 @@ impl<R: Read> StreamDecoder<R> {
         // A stream is played through: do all key geometry now, while the GOP is decoded,
         // rather than on the first frame of each key interval.
         if let Some(d) = &gop.deformer {
-            d.prepare_all_keys(&gop.canonical.dynamics);
+            d.prepare_all_keys(&gop.canonical.dynamics)?;
         }
         Ok(Arc::new(gop))
     }

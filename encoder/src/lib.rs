@@ -445,6 +445,7 @@ impl<W: Write> StreamEncoder<W> {
                     ranges,
                     reference: None,
                     packets,
+                    intra: settings.intra_only,
                 }
             }
         };

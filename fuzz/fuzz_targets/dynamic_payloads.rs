@@ -19,9 +19,15 @@ fuzz_target!(|data: &[u8]| {
             ld.decode_one(&vec![0.25; ld.input_dims()], &mut out);
         }
     } else if sel & 1 == 0 {
-        if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, reference, packets }) =
+        if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, reference, packets, intra }) =
             dlgs::payload::time_features::decode(body, 0, &s, &limits)
         {
+            if intra {
+                // Codec 3: every packet decodes alone, as a seek does it.
+                for p in &packets {
+                    let _ = dlgs_video::decode_gray12(&[p.as_slice()], tiling.width() as u32, tiling.height() as u32, 1);
+                }
+            }
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
             if let Ok(v) = dlgs_video::decode_gray12(&refs, tiling.width() as u32, tiling.height() as u32, tiling.keys) {
                 let _ = match reference {

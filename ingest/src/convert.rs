@@ -96,6 +96,7 @@ pub fn encode<W: Write>(
                 ranges: vec![],
                 reference: Some(*range),
                 packets: packets.clone(),
+                intra: false,
             }),
             _ => None,
         };

@@ -28,6 +28,10 @@ pub enum TfeaBody {
         /// (see [`untile_reference`]); `ranges` is then unused.
         reference: Option<(f64, f64)>,
         packets: Vec<Vec<u8>>,
+        /// Codec 3 (since 1.7): packet `k` is picture `k` alone, an intra picture with its own
+        /// parameter sets, so any key decodes without the others (seeking). Never with
+        /// `reference`.
+        intra: bool,
     },
 }
 
@@ -241,8 +245,32 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
             ranges,
             reference,
             packets,
+            intra,
         } => {
-            b.put_u8(if reference.is_some() { 2 } else { 1 });
+            let codec = match (reference, intra) {
+                (None, false) => 1,
+                (Some(_), false) => 2,
+                (None, true) => 3,
+                (Some(_), true) => {
+                    return Err(Error::new(
+                        ErrorKind::InvalidInput(
+                            "intra-only time features use per-channel ranges (codec 3)".into(),
+                        ),
+                        0,
+                    ))
+                }
+            };
+            if *intra && packets.len() != tiling.keys {
+                return Err(Error::new(
+                    ErrorKind::InvalidInput(format!(
+                        "intra-only time features need one packet per key: {} packets, {} keys",
+                        packets.len(),
+                        tiling.keys
+                    )),
+                    0,
+                ));
+            }
+            b.put_u8(codec);
             b.put_u8(12);
             b.put_u16(tiling.channels as u16);
             b.put_u32(tiling.n as u32);
@@ -332,7 +360,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 data,
             }))
         }
-        (1 | 2, 12) => {
+        (1..=3, 12) => {
             let tiling = Tiling {
                 n,
                 keys,
@@ -385,6 +413,12 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                     available: r.remaining() as u64,
                 }));
             }
+            if codec == 3 && count != keys {
+                return Err(bad(
+                    format!("intra-only codec 3 with {count} packets for {keys} keys"),
+                    r.offset() - 4,
+                ));
+            }
             let mut packets = Vec::with_capacity(count);
             for _ in 0..count {
                 let len = r.u32("TFEA packet length")? as usize;
@@ -401,6 +435,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 ranges,
                 reference,
                 packets,
+                intra: codec == 3,
             })
         }
         _ => Err(bad(
@@ -493,14 +528,20 @@ mod tests {
         assert_eq!(t.pixel(4, 5), (3 + 1) * 12 + (3 + 1));
     }
 
-    #[test]
-    fn exact_payload_round_trip() {
+    /// A 60-frame GOP of 5 dynamic Gaussians, 16 channels, a key every 10 frames.
+    fn five_dynamic() -> SceneHeader {
         let mut s = SceneHeader::still(0, 0);
         s.n_dynamic = 5;
         s.time_channels = 16;
         s.gop_length = 60;
         s.key_interval = 10;
         s.frame_count = 60;
+        s
+    }
+
+    #[test]
+    fn exact_payload_round_trip() {
+        let s = five_dynamic();
         let f = feats(5);
         let p = encode(&TfeaBody::Exact(f.clone()), 3).unwrap();
         assert_eq!(
@@ -510,5 +551,33 @@ mod tests {
         let mut nan = feats(5);
         nan.data[3] = f32::NAN;
         assert!(encode(&TfeaBody::Exact(nan), 3).is_err());
+    }
+
+    #[test]
+    fn intra_only_payload_needs_one_packet_per_key() {
+        let s = five_dynamic();
+        let tiling = Tiling::for_count(5, 7, 16);
+        let body = |packets: usize, intra: bool| TfeaBody::Hevc {
+            tiling,
+            ranges: vec![(0.0, 1.0); 16],
+            reference: None,
+            packets: (0..packets).map(|k| vec![k as u8; 3]).collect(),
+            intra,
+        };
+        let p = encode(&body(7, true), 3).unwrap();
+        assert_eq!(p[0], 3, "codec 3");
+        assert_eq!(decode(&p, 0, &s, &Limits::tiny()).unwrap(), body(7, true));
+        // The writer refuses another count; a reader reports one as a payload error.
+        assert!(encode(&body(6, true), 3).is_err());
+        let mut q = encode(&body(6, false), 3).unwrap();
+        q[0] = 3;
+        let e = decode(&q, 100, &s, &Limits::tiny()).unwrap_err();
+        assert!(e.to_string().contains("6 packets for 7 keys"), "{e}");
+        // Intra-only with the reference's dequantisation is not a codec.
+        let mut r = body(7, true);
+        if let TfeaBody::Hevc { reference, .. } = &mut r {
+            *reference = Some((0.0, 1.0));
+        }
+        assert!(encode(&r, 3).is_err());
     }
 }

@@ -95,6 +95,12 @@ pub fn all() -> Vec<Vector> {
         about: "2 GOPs of 60 frames, 128 of 512 lod3 Gaussians animated by the synthetic generator (no trained DLGStream model exists here), language, exact TFEA, f32 MLPW; decoded frames in lod3-dynamic.frames.f32",
     });
     v.push(Vector {
+        name: INTRA_VECTOR,
+        bytes: dynamic_intra_vector(&lod3),
+        error: None,
+        about: "lod3-dynamic's model with its time features as intra-only 12-bit HEVC (TFEA codec 3, since 1.7: one IDR picture with its own parameter sets per key; libx265 crf 6, preset ultrafast); decoded frames in lod3-dynamic-intra.frames.f32",
+    });
+    v.push(Vector {
         name: LAED_VECTOR,
         bytes: laed_vector(&lang),
         error: None,
@@ -305,6 +311,10 @@ pub fn expected_lines(v: &Vector) -> Vec<String> {
 
 /// The dynamic vector's name; its decoded frames are in `valid/<name>.frames.f32`.
 pub const DYNAMIC_VECTOR: &str = "lod3-dynamic";
+/// The same model with intra-only HEVC time features (`TFEA` codec 3); frames listed likewise.
+pub const INTRA_VECTOR: &str = "lod3-dynamic-intra";
+/// Vectors whose decoded frames at [`FRAME_TIMES`] are listed.
+pub const FRAME_VECTORS: [&str; 2] = [DYNAMIC_VECTOR, INTRA_VECTOR];
 /// Times (seconds) whose frames the vector lists: a key, between keys, between frames, the
 /// first frame of GOP 1, near the end.
 pub const FRAME_TIMES: [f64; 5] = [0.0, 0.5, 1.2345, 2.0, 3.95];
@@ -323,6 +333,21 @@ fn first_512(scene: &dlgs::Gaussians) -> dlgs::Gaussians {
 }
 
 fn dynamic_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
+    dynamic_model_vector(scene, dlgs_encoder::FeatureCodec::Exact)
+}
+
+fn dynamic_intra_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
+    dynamic_model_vector(
+        scene,
+        dlgs_encoder::FeatureCodec::Hevc(dlgs_encoder::HevcSettings {
+            intra_only: true,
+            preset: "ultrafast".into(),
+            ..Default::default()
+        }),
+    )
+}
+
+fn dynamic_model_vector(scene: &dlgs::Gaussians, features: dlgs_encoder::FeatureCodec) -> Vec<u8> {
     use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
     // The first 512 Gaussians keep the file small; 128 of them move.
     let part = first_512(scene);
@@ -335,7 +360,7 @@ fn dynamic_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
     };
     let m = synth_dynamic(&part, &spec).unwrap();
     let cfg = dlgs_encoder::EncoderConfig {
-        features: dlgs_encoder::FeatureCodec::Exact,
+        features,
         ..Default::default()
     };
     write_model(&m, cfg, Vec::new()).unwrap()

@@ -60,7 +60,12 @@ fn invalid_vectors_fail_with_the_listed_error() {
 
 #[test]
 fn committed_vectors_equal_what_the_generator_builds() {
-    for v in vectors::all() {
+    // The intra-only vector holds libx265 output, which may differ between x265 builds; its
+    // frames are checked against the listed ones instead.
+    for v in vectors::all()
+        .into_iter()
+        .filter(|v| v.name != vectors::INTRA_VECTOR)
+    {
         let dir = if v.error.is_some() {
             "invalid"
         } else {
@@ -95,8 +100,13 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
 }
 
 #[test]
-fn dynamic_vector_decodes_to_the_listed_frames() {
-    let name = vectors::DYNAMIC_VECTOR;
+fn dynamic_vectors_decode_to_the_listed_frames() {
+    for name in vectors::FRAME_VECTORS {
+        dynamic_vector_decodes_to_its_frames(name);
+    }
+}
+
+fn dynamic_vector_decodes_to_its_frames(name: &str) {
     let (bytes, want) = vector_and_values(name, "frames");
     let got = vectors::dynamic_frames(&bytes);
     // 128 dynamic Gaussians x (3+3+4+1+1+48+9) values x 5 times.

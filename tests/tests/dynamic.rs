@@ -118,7 +118,7 @@ fn exact_features_round_trip_bit_for_bit() {
     let mut dec = open(&bytes);
     for g in 0..2 {
         let gop = dec.gop(g).unwrap();
-        let d = gop.dynamic().unwrap();
+        let d = gop.dynamic().unwrap().unwrap();
         assert_eq!(d.features, m.gops[g as usize].features);
         assert_eq!(d.mlps, m.gops[g as usize].mlps);
         assert_eq!(*gop.canonical, m.canonical);
@@ -128,7 +128,7 @@ fn exact_features_round_trip_bit_for_bit() {
 fn feature_error_table(m: &SynthModel, bytes: &[u8]) -> (f32, f32) {
     let mut dec = open(bytes);
     let d = dec.gop(0).unwrap();
-    let got = d.dynamic().unwrap().features;
+    let got = d.dynamic().unwrap().unwrap().features;
     let want = &m.gops[0].features;
     let ranges = time_features::ranges(want, false);
     let (mut worst_max, mut worst_mean) = (0f32, 0f32);
@@ -163,7 +163,7 @@ fn hevc_lossless_is_exactly_the_12_bit_quantisation() {
     );
     let mut dec = open(&bytes);
     let gop = dec.gop(0).unwrap();
-    let got = gop.dynamic().unwrap().features;
+    let got = gop.dynamic().unwrap().unwrap().features;
     let f = &m.gops[0].features;
     let t = Tiling::for_count(f.n, f.keys, f.channels);
     let r = time_features::ranges(f, false);
@@ -334,7 +334,8 @@ fn frames_do_not_depend_on_the_order_keys_were_first_needed() {
     let gop = stream.next_gop().unwrap().expect("one GOP");
     for (i, &t) in times.iter().enumerate() {
         let f =
-            dlgs_decoder::DecodedGop::frame(&gop, scene.locate(t).unwrap(), &o, Default::default());
+            dlgs_decoder::DecodedGop::frame(&gop, scene.locate(t).unwrap(), &o, Default::default())
+                .unwrap();
         assert_eq!(bits(&f.dynamics), a[i], "stream, t = {t}");
     }
 }
@@ -444,4 +445,70 @@ fn degenerate_view_and_rotation_stay_finite() {
         .chain(d.lang_opacity.iter().copied())
         .chain(d.lang.iter().copied());
     assert!(all.into_iter().all(f32::is_finite));
+}
+
+#[test]
+fn intra_only_features_seek_by_decoding_two_keys_and_give_the_same_frames() {
+    // SYNTHETIC dynamic model from the real lod2 tile, 2 GOPs; time features as intra-only
+    // HEVC (TFEA codec 3).
+    let m = model(false, 2);
+    let intra = encode(
+        &m,
+        FeatureCodec::Hevc(HevcSettings {
+            intra_only: true,
+            preset: "ultrafast".into(),
+            ..Default::default()
+        }),
+    );
+    let inter = encode(
+        &m,
+        FeatureCodec::Hevc(HevcSettings {
+            preset: "ultrafast".into(),
+            ..Default::default()
+        }),
+    );
+    let o = opts(&camera(&m), false);
+    let duration = m.scene.frame_count as f64 / m.scene.fps();
+    let times = [0.0, 0.37 * duration, 0.5 * duration + 0.01, duration];
+    // The stream decoder decodes every key of a GOP up front: the reference frames.
+    let mut stream = dlgs_decoder::stream::StreamDecoder::new(intra.as_slice()).unwrap();
+    let scene = stream.scene().clone();
+    let mut gops = Vec::new();
+    while let Some(g) = stream.next_gop().unwrap() {
+        assert_eq!(g.deformer.as_ref().unwrap().loaded_keys(), 7);
+        gops.push(g);
+    }
+    for &t in &times {
+        let time = scene.locate(t).unwrap();
+        let want =
+            dlgs_decoder::DecodedGop::frame(&gops[time.gop as usize], time, &o, Default::default())
+                .unwrap();
+        // A fresh random-access decoder: the seek decodes the 2 keys around t, no more.
+        let mut dec = open(&intra);
+        let got = dec.seek(t, &o).unwrap();
+        let loaded = got.gop.deformer.as_ref().unwrap().loaded_keys();
+        assert_eq!(loaded, 2, "t = {t}: keys {} and {}", time.key, time.key + 1);
+        assert_eq!(bits(&got.dynamics), bits(&want.dynamics), "t = {t}");
+        // Moving on within the GOP decodes the next keys on demand, same values.
+        let later = (t + 0.6 * scene.gop_length as f64 / scene.fps()).min(duration);
+        let lt = scene.locate(later).unwrap();
+        if lt.gop == time.gop {
+            let a = dec.frame_at(later, &o).unwrap();
+            let b =
+                dlgs_decoder::DecodedGop::frame(&gops[lt.gop as usize], lt, &o, Default::default())
+                    .unwrap();
+            assert_eq!(bits(&a.dynamics), bits(&b.dynamics), "t = {later}");
+        }
+    }
+    // Intra-only costs bytes at the same crf and changes the error; both stay close.
+    let (intra_max, _) = feature_error_table(&m, &intra);
+    let (inter_max, _) = feature_error_table(&m, &inter);
+    println!("bytes: intra-only {}, default {}", intra.len(), inter.len());
+    println!("worst max error / range: intra-only {intra_max:.5}, default {inter_max:.5}");
+    // Measured (ultrafast, crf 6): 3.5 % and 3.7 % of the channel range at worst.
+    assert!(intra_max < 0.05 && inter_max < 0.05);
+    assert!(
+        intra.len() < inter.len() * 11 / 10,
+        "intra-only within 10 % of the bytes"
+    );
 }

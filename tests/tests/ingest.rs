@@ -155,7 +155,7 @@ fn dlgs_decodes_to_the_ingested_model_bit_for_bit() {
         let d = dec.gop(g as u32).unwrap();
         assert_eq!(d.canonical.statics, gop.statics, "GOP {g} statics");
         assert_eq!(d.canonical.dynamics, gop.dynamics, "GOP {g} dynamics");
-        let dy = d.dynamic().unwrap();
+        let dy = d.dynamic().unwrap().unwrap();
         assert_eq!(dy.features, gop.features, "GOP {g} features");
         assert_eq!(dy.mlps, gop.mlps, "GOP {g} decoders");
     }
@@ -437,7 +437,7 @@ fn a_run_with_only_checkpoints_reads_them_and_compressed_files_win_otherwise() {
         let d = dec.gop(g as u32).unwrap();
         assert_eq!(d.canonical.statics, gop.statics, "GOP {g} statics");
         assert_eq!(d.canonical.dynamics, gop.dynamics, "GOP {g} dynamics");
-        let dy = d.dynamic().unwrap();
+        let dy = d.dynamic().unwrap().unwrap();
         assert_eq!(dy.mlps, gop.mlps, "GOP {g} decoders");
         // Lossy like the reference's own video (same crf 6): measured against the trained
         // features, ours vs what the reference's mp4 decodes to.

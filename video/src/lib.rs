@@ -40,6 +40,9 @@ pub struct HevcSettings {
     pub preset: String,
     /// Mathematically lossless coding of the 12-bit samples (crf is ignored).
     pub lossless: bool,
+    /// Every picture an IDR picture with its own VPS/SPS/PPS, one packet each, so any picture
+    /// decodes alone (a seek decodes the 2 keys it needs instead of the GOP's 7).
+    pub intra_only: bool,
 }
 
 impl Default for HevcSettings {
@@ -48,6 +51,7 @@ impl Default for HevcSettings {
             crf: 6,
             preset: "medium".into(),
             lossless: false,
+            intra_only: false,
         }
     }
 }
@@ -121,6 +125,9 @@ pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, V
     } else {
         opts.set("crf", &s.crf.to_string());
     }
+    if s.intra_only {
+        params.push_str(":keyint=1:min-keyint=1:open-gop=0:repeat-headers=1:bframes=0");
+    }
     opts.set("x265-params", &params);
     let mut enc = enc.open_with(opts).map_err(ff_err("open libx265"))?;
 
@@ -148,6 +155,13 @@ pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, V
     }
     enc.send_eof().map_err(ff_err("encode flush"))?;
     drain_packets(&mut enc, &mut packets)?;
+    if s.intra_only && packets.len() != video.frames.len() {
+        return Err(VideoError::Invalid(format!(
+            "intra-only coding gave {} packets for {} pictures",
+            packets.len(),
+            video.frames.len()
+        )));
+    }
     Ok(packets)
 }
 
@@ -326,6 +340,26 @@ mod tests {
             .max()
             .unwrap();
         assert!(max < 400, "max error {max}");
+    }
+
+    #[test]
+    fn intra_only_pictures_decode_alone_as_in_the_whole_stream() {
+        let v = ramp(64, 48, 7);
+        let s = HevcSettings {
+            intra_only: true,
+            ..Default::default()
+        };
+        let pk = encode_gray12(&v, &s).unwrap();
+        assert_eq!(pk.len(), 7, "one packet per picture");
+        let refs: Vec<&[u8]> = pk.iter().map(|p| p.as_slice()).collect();
+        let all = decode_gray12(&refs, 64, 48, 7).unwrap();
+        for (k, p) in pk.iter().enumerate().rev() {
+            let one = decode_gray12(&[p.as_slice()], 64, 48, 1).unwrap();
+            assert_eq!(one.frames[0], all.frames[k], "picture {k}");
+        }
+        // Two pictures out of order of the stream, as a seek between keys 4 and 5 needs.
+        let pair = decode_gray12(&[pk[4].as_slice(), pk[5].as_slice()], 64, 48, 2).unwrap();
+        assert_eq!(pair.frames, all.frames[4..6]);
     }
 
     #[test]

@@ -18,7 +18,7 @@ fn main() {
             "valid"
         };
         std::fs::write(root.join(dir).join(format!("{}.dlgs", v.name)), &v.bytes).unwrap();
-        if v.name == dlgs_tests::vectors::DYNAMIC_VECTOR {
+        if dlgs_tests::vectors::FRAME_VECTORS.contains(&v.name) {
             let frames: Vec<u8> = dlgs_tests::vectors::dynamic_frames(&v.bytes)
                 .iter()
                 .flat_map(|x| x.to_le_bytes())
