@@ -33,7 +33,20 @@ struct Info {
     scene_chunks: BTreeMap<String, u64>,
     chunk_bytes_by_type: BTreeMap<String, u64>,
     index_bytes: u64,
+    /// How GOP 0 codes its time features (`TFEA` codec, §6.2), when the scene has dynamics.
+    time_features: Option<String>,
     gops: Vec<GopRow>,
+}
+
+/// `TFEA` codec byte (§6.2) in words.
+fn tfea_codec_name(codec: u8) -> String {
+    match codec {
+        0 => "exact f32 (TFEA codec 0)".into(),
+        1 => "12-bit HEVC (TFEA codec 1)".into(),
+        2 => "the reference run's own 12-bit HEVC stream (TFEA codec 2)".into(),
+        3 => "intra-only 12-bit HEVC, every key decodable alone (TFEA codec 3)".into(),
+        c => format!("unknown TFEA codec {c}"),
+    }
 }
 
 fn collect(path: &Path) -> Result<Info> {
@@ -47,8 +60,19 @@ fn collect(path: &Path) -> Result<Info> {
         *scene_chunks.entry(c.ty.to_string()).or_insert(0) += c.len;
         *by_type.entry(c.ty.to_string()).or_insert(0) += c.len;
     }
+    let mut time_features = None;
     let mut gops = Vec::new();
     for e in r.index().entries.clone() {
+        if time_features.is_none() {
+            if let Some(c) = r
+                .gop_chunks(e.gop)?
+                .into_iter()
+                .find(|c| c.ty == dlgs::container::ChunkType::TFEA)
+            {
+                let p = r.payload(&c)?;
+                time_features = p.first().map(|&b| tfea_codec_name(b));
+            }
+        }
         let mut chunks = BTreeMap::new();
         for c in r.gop_chunks(e.gop)? {
             *chunks.entry(c.ty.to_string()).or_insert(0) += c.len;
@@ -76,6 +100,7 @@ fn collect(path: &Path) -> Result<Info> {
         scene_chunks,
         chunk_bytes_by_type: by_type,
         index_bytes: r.index_bytes(),
+        time_features,
         gops,
     })
 }
@@ -109,6 +134,9 @@ pub fn run_info(path: &Path, json: bool) -> Result<()> {
         "  {} static + {} dynamic Gaussians, SH degree {}, language {}x{}, {} time channels",
         h.n_static, h.n_dynamic, h.sh_degree, h.lang_levels, h.lang_dims, h.time_channels
     );
+    if let Some(t) = &info.time_features {
+        println!("  time features: {t}");
+    }
     println!(
         "  bytes per frame: {:.1} ({:.2} KiB)",
         info.bytes_per_frame,
