@@ -15,10 +15,8 @@ export RUST_BACKTRACE=0
 metric() { $DLGS compare "$1" "$2" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f | %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
 echo "| scene | N | format | bytes | bits/G | % of SOG | PSNR dB | SSIM | encode s | decode ms |"
 echo "|---|---|---|---|---|---|---|---|---|---|"
-for s in ply/gs3d-fork_lod3_tile_0_1971_sh3.ply ply/supersplat_fruit_drops_minimal_4721_sh3.ply \
-         ply/gs3d-fork_lod2_tile_0_6831_sh3.ply ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply \
-         ply/gsplat_DATA_new_22589_sh3.ply ply/v3dg_donut_mipsplatting_45624_sh0.ply \
-         splat/marcelpadilla_plant.splat; do
+source scripts/real_scenes.sh
+for s in "${SCENES[@]}"; do
   src="$DATA/$s"; name=$(basename "${s%.*}")
   # Gaussian counts from ../shared/data/MANIFEST.md.
   case "$name" in

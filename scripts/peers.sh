@@ -10,15 +10,7 @@ OUT=${1:-target/peers}
 DATA=${DLGS_DATA:-../shared/data}
 mkdir -p "$OUT"
 ST=(npx -y @playcanvas/splat-transform@2.7.1)
-SCENES=(
-  ply/gs3d-fork_lod3_tile_0_1971_sh3.ply
-  ply/supersplat_fruit_drops_minimal_4721_sh3.ply
-  ply/gs3d-fork_lod2_tile_0_6831_sh3.ply
-  ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply
-  ply/gsplat_DATA_new_22589_sh3.ply
-  ply/v3dg_donut_mipsplatting_45624_sh0.ply
-  splat/marcelpadilla_plant.splat
-)
+source scripts/real_scenes.sh
 printf 'scene\tformat\tbytes\tencode_s\n' > "$OUT/times.tsv"
 for s in "${SCENES[@]}"; do
   name=$(basename "${s%.*}")

@@ -24,10 +24,8 @@ LADDER=(
 )
 echo "| scene | SPZ bytes | SPZ PSNR dB | smallest dlgs at >= SPZ's PSNR | bytes | PSNR dB | % of SPZ |"
 echo "|---|---|---|---|---|---|---|"
-for s in ply/gs3d-fork_lod3_tile_0_1971_sh3.ply ply/supersplat_fruit_drops_minimal_4721_sh3.ply \
-         ply/gs3d-fork_lod2_tile_0_6831_sh3.ply ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply \
-         ply/gsplat_DATA_new_22589_sh3.ply ply/v3dg_donut_mipsplatting_45624_sh0.ply \
-         splat/marcelpadilla_plant.splat; do
+source scripts/real_scenes.sh
+for s in "${SCENES[@]}"; do
   src="$DATA/$s"; name=$(basename "${s%.*}")
   spz_bytes=$(stat -c %s "$PEERS/$name.spz")
   spz_psnr=$(psnr "$src" "$PEERS/$name.spz.ply")
