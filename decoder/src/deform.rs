@@ -1,8 +1,9 @@
 //! Turn a GOP's canonical dynamic Gaussians plus its deformation field into the Gaussians of
 //! one instant (format-spec §6.4). Geometry that depends only on a key is computed once per GOP,
-//! the first time a frame needs that key (a seek needs 2 of the 7); per frame only the Hermite/slerp blend and the view-dependent appearance (and language, if
-//! asked) are evaluated. Work is split into fixed blocks of rows, each written in place into the
-//! output, so the result never depends on the thread count.
+//! the first time a frame needs that key (a seek needs 2 of the 7); per frame only the
+//! Hermite/slerp blend and the view-dependent appearance (and language, if asked) are evaluated.
+//! Work is split into fixed blocks of rows, each written in place into the output, so the result
+//! never depends on the thread count.
 
 use std::ops::Range;
 use std::sync::OnceLock;

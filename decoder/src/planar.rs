@@ -87,13 +87,8 @@ impl PlanarFeatures {
             .map(|k| source.key(k).map(|v| (k, v)))
             .collect::<Result<_>>()?;
         for (k, v) in decoded {
-            let want = self.channels * self.n;
-            if v.len() != want {
-                panic!(
-                    "key source gave {} values for key {k}, want {want}",
-                    v.len()
-                );
-            }
+            // The source is this crate's own untiling, sized by the tiling: not input.
+            assert_eq!(v.len(), self.channels * self.n, "key {k}'s (C, N) block");
             // Another thread may have filled it first with the same values.
             let _ = slots[k].set(v);
         }

@@ -5,16 +5,13 @@
 //! `antialiased`) only lower the opacity. Dropping such Gaussians from a still scene changes no
 //! pixel and saves their bytes (3.3 % of the Mip-Splatting donut).
 
+use dlgs::model::sigmoid;
 use dlgs::Gaussians;
 
 /// True when Gaussian `i` cannot reach alpha 1/255 anywhere, in colour or language.
 pub fn never_drawn(g: &Gaussians, i: usize) -> bool {
     let below = |logit: f32| sigmoid(logit) * 255.0 < 1.0;
     below(g.opacity[i]) && (!g.has_language() || below(g.lang_opacity[i]))
-}
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
 }
 
 /// `g` without its never-drawn Gaussians, in the same order, and how many were dropped.

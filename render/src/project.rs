@@ -6,6 +6,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::sh::eval_sh;
+use dlgs::model::sigmoid;
 use dlgs::Gaussians;
 
 pub const TILE: u32 = 16;
@@ -33,11 +34,6 @@ pub struct Splat2d {
     pub tiles: [u16; 4],
     /// Index into the source Gaussians.
     pub index: u32,
-}
-
-#[inline]
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
 }
 
 /// Rotation matrix of a raw w-first quaternion. A zero quaternion yields the identity

@@ -5,6 +5,12 @@
 use crate::error::{Error, ErrorKind, Result};
 
 /// Number of SH coefficients per colour channel for `degree` (1, 4, 9, 16).
+/// A stored (pre-activation) opacity as the opacity compositing uses: `1 / (1 + e^-x)`.
+#[inline]
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
 pub fn sh_coeffs(degree: u8) -> usize {
     let d = degree as usize + 1;
     d * d

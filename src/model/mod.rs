@@ -7,4 +7,4 @@ pub mod ntc;
 pub mod residual;
 
 pub use dynamic::{DeformMlps, DynamicGop, Layer, Mlp, MlpRole, TimeFeatures, TimePoint};
-pub use gaussians::{sh_coeffs, Canonical, Gaussians};
+pub use gaussians::{sh_coeffs, sigmoid, Canonical, Gaussians};

@@ -9,7 +9,7 @@ use crate::bytes::{ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
 use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;
-use crate::model::{Canonical, Gaussians};
+use crate::model::{sigmoid, Canonical, Gaussians};
 use crate::payload::grid_coder::{self, GridCodec};
 
 /// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
@@ -153,10 +153,6 @@ impl Kind {
             Kind::Lang(_) => b.lang,
         }
     }
-}
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
 }
 
 /// Normalised quaternion, identity for a zero one, sign so the largest |component| is positive;
