@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Canonical compression side by side on every real scene (issue 5, BENCHMARKS.md): raw PLY,
-# SPZ v4 and PlayCanvas SOG v2 (from scripts/peers.sh), and dlgs CSOG at high/medium/low.
+# SPZ v4 and PlayCanvas SOG v2 (from scripts/peers.sh), and dlgs CSOG at high/medium/low, with
+# and without bit reallocation and level shaping.
 # Rendered PSNR/SSIM against the uncompressed scene from 8 orbit cameras (dlgs compare).
 # Usage: bash scripts/canonical_rd.sh [PEERS_DIR]  (run scripts/peers.sh PEERS_DIR first)
 set -euo pipefail
@@ -33,11 +34,14 @@ for s in "${SCENES[@]}"; do
     enc=$(awk -F'\t' -v n="$name" -v f="$fmt" '$1==n && $2==f {print $4}' "$PEERS/times.tsv")
     row "$fmt" "$(stat -c %s "$PEERS/$name.$fmt")" "$(metric "$src" "$PEERS/$name.$fmt.ply")" "$enc" "-"
   done
-  # Presets as they are, then high and medium with up to 4 bits moved between attribute
-  # groups by rendering (--reallocate-bits: its own 5 views, not these 8).
-  for setting in high medium low high+realloc medium+realloc; do
-    q=${setting%+realloc}; extra=()
-    [ "$setting" != "$q" ] && extra=(--reallocate-bits 4)
+  # Presets as they are; +realloc: up to 4 bits moved between attribute groups by rendering
+  # (--reallocate-bits: its own 5 views, not these 8); +shape: levels chosen by estimated bits
+  # plus importance-weighted error (--shape 0.1: importance over 36 views of its own).
+  for setting in high medium low high+realloc medium+realloc high+shape medium+shape low+shape \
+      high+realloc+shape medium+realloc+shape low+realloc+shape; do
+    q=${setting%%+*}; extra=()
+    [[ "$setting" == *realloc* ]] && extra+=(--reallocate-bits 4)
+    [[ "$setting" == *shape* ]] && extra+=(--shape 0.1)
     f="$OUT/$name-$setting.dlgs"
     start=$(date +%s.%N); $DLGS encode "$src" -o "$f" --quality "$q" "${extra[@]}" > /dev/null; end=$(date +%s.%N)
     dec=$(target/release/examples/decode_timing "$f" 5 | grep -o 'median [0-9.]*' | cut -d' ' -f2)

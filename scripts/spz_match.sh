@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Issue 5, the SPZ half of the goal read at SPZ's own quality: for every real scene, the smallest
-# dlgs file (presets and a ladder of lower bit settings) whose rendered PSNR against the
+# dlgs file (presets and a ladder of lower bit settings, with and without --shape) whose rendered PSNR against the
 # uncompressed scene is at least SPZ's, and its size as a fraction of the SPZ file.
 # Usage: bash scripts/spz_match.sh [PEERS_DIR]  (run scripts/peers.sh PEERS_DIR first)
 set -euo pipefail
@@ -30,16 +30,22 @@ for s in "${SCENES[@]}"; do
   spz_bytes=$(stat -c %s "$PEERS/$name.spz")
   spz_psnr=$(psnr "$src" "$PEERS/$name.spz.ply")
   best="none|-|-"
-  for rung in "${LADDER[@]}"; do
-    label=${rung%%|*}; read -r -a opts <<< "${rung#*|}"
-    f="$OUT/$name-$label.dlgs"
-    $DLGS encode "$src" -o "$f" "${opts[@]}" > /dev/null
-    p=$(psnr "$src" "$f")
-    if python3 -c "import sys; sys.exit(0 if $p >= $spz_psnr else 1)"; then
-      best="$label|$(stat -c %s "$f")|$p"
-    else
-      break
-    fi
+  # The ladder as it is, then with level shaping (--shape 0.1); each stops at its first rung
+  # below SPZ's PSNR; the smallest passing file of either wins.
+  for shape in "" "0.1"; do
+    for rung in "${LADDER[@]}"; do
+      label=${rung%%|*}; read -r -a opts <<< "${rung#*|}"
+      if [ -n "$shape" ]; then label="$label+shape"; opts+=(--shape "$shape"); fi
+      f="$OUT/$name-$label.dlgs"
+      $DLGS encode "$src" -o "$f" "${opts[@]}" > /dev/null
+      p=$(psnr "$src" "$f")
+      if python3 -c "import sys; sys.exit(0 if $p >= $spz_psnr else 1)"; then
+        size=$(stat -c %s "$f"); prev=$(cut -d'|' -f2 <<< "$best")
+        if [ "$prev" = "-" ] || [ "$size" -lt "$prev" ]; then best="$label|$size|$p"; fi
+      else
+        break
+      fi
+    done
   done
   IFS='|' read -r label bytes p <<< "$best"
   pct="-"; [ "$bytes" != "-" ] && pct="$(python3 -c "print('%.0f %%' % (100 * $bytes / $spz_bytes))")"

@@ -8,6 +8,7 @@
 
 pub mod bit_allocation;
 pub mod grid_sort;
+pub mod importance;
 pub mod invisible;
 pub mod orientation;
 pub mod synth;
@@ -163,6 +164,11 @@ pub struct EncoderConfig {
     /// Lossy (`CSOG`) still scenes: leave out the Gaussians no renderer draws (both opacities
     /// below 1/255, [`invisible`]). No pixel changes.
     pub drop_invisible: bool,
+    /// Lossy (`CSOG`) still scenes: choose each level by estimated bits plus error weighted by
+    /// the Gaussian's importance over this tolerance ([`importance`]), so Gaussians that add
+    /// little to any image take levels that code smaller; 0 = nearest levels. Larger = smaller
+    /// files, lower PSNR.
+    pub shape_tolerance: f64,
 }
 
 impl Default for EncoderConfig {
@@ -182,6 +188,7 @@ impl Default for EncoderConfig {
             canonical_orientation: true,
             reallocate_bits: 0,
             drop_invisible: true,
+            shape_tolerance: 0.0,
         }
     }
 }
@@ -395,9 +402,16 @@ impl<W: Write> StreamEncoder<W> {
                 if first {
                     self.static_order = Some(order);
                 }
+                let weights = (first && still && self.cfg.shape_tolerance > 0.0)
+                    .then(|| importance::weights(&sorted.statics, self.cfg.shape_tolerance));
                 (
                     ChunkType::CSOG,
-                    sorted_grid::encode(&sorted, &bits, self.cfg.zstd_level)?,
+                    sorted_grid::encode_shaped(
+                        &sorted,
+                        &bits,
+                        self.cfg.zstd_level,
+                        weights.as_deref(),
+                    )?,
                 )
             }
         })

@@ -50,7 +50,7 @@ impl GridCodec {
 
 /// Left, up and up-left neighbours of cell `i` (0 where absent) and whether each exists.
 #[inline]
-fn neighbours(q: &[u16], i: usize, width: usize) -> (u16, u16, u16, bool, bool) {
+pub(crate) fn neighbours(q: &[u16], i: usize, width: usize) -> (u16, u16, u16, bool, bool) {
     let (x, y) = (i % width, i / width);
     let a = if x > 0 { q[i - 1] } else { 0 };
     let b = if y > 0 { q[i - width] } else { 0 };
@@ -60,7 +60,7 @@ fn neighbours(q: &[u16], i: usize, width: usize) -> (u16, u16, u16, bool, bool) 
 
 /// Median edge detector; the first row predicts from the left, the first column from above.
 #[inline]
-fn predict(a: u16, b: u16, c: u16, has_a: bool, has_b: bool) -> u16 {
+pub(crate) fn predict(a: u16, b: u16, c: u16, has_a: bool, has_b: bool) -> u16 {
     match (has_a, has_b) {
         (true, true) => {
             let (lo, hi) = (a.min(b), a.max(b));
@@ -80,12 +80,12 @@ fn predict(a: u16, b: u16, c: u16, has_a: bool, has_b: bool) -> u16 {
 
 /// Bit length of `v` (0 for 0).
 #[inline]
-fn class_of(v: u32) -> u32 {
+pub(crate) fn class_of(v: u32) -> u32 {
     32 - v.leading_zeros()
 }
 
 #[inline]
-fn context(a: u16, b: u16, c: u16, t0: u32) -> usize {
+pub(crate) fn context(a: u16, b: u16, c: u16, t0: u32) -> usize {
     let act = (a as i32 - c as i32).unsigned_abs()
         + (b as i32 - c as i32).unsigned_abs()
         + (a as i32 - b as i32).unsigned_abs();
@@ -102,7 +102,7 @@ fn context(a: u16, b: u16, c: u16, t0: u32) -> usize {
 /// Residual `q - pred` modulo `2^bits`, as a signed value in `[-2^(bits-1), 2^(bits-1))`,
 /// zigzag-mapped to `[0, 2^bits)`.
 #[inline]
-fn zigzag(q: u16, pred: u16, bits: u8) -> u32 {
+pub(crate) fn zigzag(q: u16, pred: u16, bits: u8) -> u32 {
     let m = 1i32 << bits;
     let mut r = (q as i32 - pred as i32).rem_euclid(m);
     if r >= m / 2 {
@@ -140,8 +140,8 @@ fn model(p: &[u32]) -> Option<Model> {
 }
 
 /// Encode with the predictive codec.
-pub fn encode_predictive(q: &[u16], width: usize, bits: u8) -> Vec<u8> {
-    // Context threshold: the median activity class, so the three contexts split the cells.
+/// Context threshold: the median activity class, so the three contexts split the cells.
+pub(crate) fn activity_threshold(q: &[u16], width: usize) -> u32 {
     let mut hist = [0u64; 34];
     for i in 0..q.len() {
         let (a, b, c, ..) = neighbours(q, i, width);
@@ -151,13 +151,16 @@ pub fn encode_predictive(q: &[u16], width: usize, bits: u8) -> Vec<u8> {
         hist[class_of(act) as usize] += 1;
     }
     let mut acc = 0;
-    let t0 = hist
-        .iter()
+    hist.iter()
         .position(|&h| {
             acc += h;
             acc * 2 >= q.len() as u64
         })
-        .unwrap_or(0) as u32;
+        .unwrap_or(0) as u32
+}
+
+pub fn encode_predictive(q: &[u16], width: usize, bits: u8) -> Vec<u8> {
+    let t0 = activity_threshold(q, width);
 
     let symbols: Vec<(usize, u32, u32)> = (0..q.len())
         .map(|i| {

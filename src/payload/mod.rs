@@ -3,6 +3,7 @@
 pub mod binary_bits;
 pub mod delta_residual;
 pub mod grid_coder;
+pub mod grid_shaping;
 pub mod lang_decoder;
 pub mod mlp_weights;
 pub mod ntc_residual;

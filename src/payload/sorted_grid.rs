@@ -11,6 +11,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;
 use crate::model::{sigmoid, Canonical, Gaussians};
 use crate::payload::grid_coder::{self, GridCodec};
+use crate::payload::grid_shaping;
 
 /// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -335,37 +336,100 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
     QuantisedSet { channels }
 }
 
-/// Quantise and code every channel of a set, in payload order.
-fn code_set(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<Channel> {
+/// Quantise and code every channel of a set, in payload order. With `weight` (one per
+/// Gaussian: bits one squared quantisation step of its error is worth) each channel is also
+/// shaped ([`grid_shaping`]) for each codec family and the smallest coding kept; the rotation
+/// index is never moved.
+fn code_set(
+    g: &Gaussians,
+    bits: &QuantBits,
+    zstd_level: i32,
+    weight: Option<&[f32]>,
+) -> Vec<Channel> {
     let w = grid_width(g.len()).max(1);
     let chans = quantise_set(g, bits).channels;
-    (0..chans.len())
-        .into_par_iter()
-        .map(|j| {
-            let (b, min, max, q) = &chans[j];
-            // Codec 4 may code the difference from the previous channel when its bits match.
-            let prev = j
-                .checked_sub(1)
-                .map(|p| &chans[p])
-                .filter(|p| p.0 == *b)
-                .map(|p| p.3.as_slice());
-            let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
-            Channel {
+    let Some(weight) = weight else {
+        return (0..chans.len())
+            .into_par_iter()
+            .map(|j| {
+                let (b, min, max, q) = &chans[j];
+                // Codec 4 may code the difference from the previous channel when its bits match.
+                let prev = j
+                    .checked_sub(1)
+                    .map(|p| &chans[p])
+                    .filter(|p| p.0 == *b)
+                    .map(|p| p.3.as_slice());
+                let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
+                Channel {
+                    bits: *b,
+                    min: *min,
+                    max: *max,
+                    codec,
+                    data,
+                }
+            })
+            .collect();
+    };
+    assert_eq!(weight.len(), g.len(), "one weight per Gaussian");
+    let kinds = channels(g);
+    // In order: codec 4 and its shaper need the previous channel's final cells.
+    let mut out: Vec<Channel> = Vec::with_capacity(chans.len());
+    let mut finals: Vec<Vec<u16>> = Vec::with_capacity(chans.len());
+    for (j, (b, min, max, q0)) in chans.iter().enumerate() {
+        let prev = j
+            .checked_sub(1)
+            .filter(|&p| chans[p].0 == *b)
+            .map(|p| finals[p].as_slice());
+        let mut variants = vec![q0.clone()];
+        if kinds[j] != Kind::RotIndex && max > min {
+            let scale = levels(*b) / (max - min);
+            let exact: Vec<f32> = values(g, kinds[j])
+                .iter()
+                .map(|&v| ((v - min) * scale).clamp(0.0, levels(*b)))
+                .collect();
+            let cells = grid_shaping::Cells {
+                exact: &exact,
+                nearest: q0,
+                weight,
                 bits: *b,
-                min: *min,
-                max: *max,
-                codec,
-                data,
+            };
+            variants.push(grid_shaping::for_prediction(&cells, w));
+            variants.push(grid_shaping::for_histogram(&cells, None));
+            if let Some(p) = prev {
+                variants.push(grid_shaping::for_histogram(&cells, Some(p)));
             }
-        })
-        .collect()
+        }
+        let (q, (codec, data)) = variants
+            .into_par_iter()
+            .map(|q| {
+                let coded = grid_coder::encode_best(&q, prev, w, *b, zstd_level);
+                (q, coded)
+            })
+            .min_by_key(|(_, (_, d))| d.len())
+            .expect("at least the unshaped cells");
+        out.push(Channel {
+            bits: *b,
+            min: *min,
+            max: *max,
+            codec,
+            data,
+        });
+        finals.push(q);
+    }
+    out
 }
 
 /// Bytes of a channel record before its data: bits, codec, min, max, len (§6.5.2).
 const CHANNEL_HEADER_LEN: usize = 14;
 
-fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i32) {
-    let chans = code_set(g, bits, zstd_level);
+fn encode_set(
+    out: &mut Vec<u8>,
+    g: &Gaussians,
+    bits: &QuantBits,
+    zstd_level: i32,
+    weight: Option<&[f32]>,
+) {
+    let chans = code_set(g, bits, zstd_level, weight);
     out.put_u32(grid_width(g.len()) as u32);
     out.put_u16(chans.len() as u16);
     for c in chans {
@@ -381,7 +445,7 @@ fn encode_set(out: &mut Vec<u8>, g: &Gaussians, bits: &QuantBits, zstd_level: i3
 /// Coded bytes per attribute group of one set, for reports: (group name, bytes).
 pub fn breakdown(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<(&'static str, usize)> {
     let kinds = channels(g);
-    let sizes = code_set(g, bits, zstd_level)
+    let sizes = code_set(g, bits, zstd_level, None)
         .into_iter()
         .map(|c| c.data.len() + CHANNEL_HEADER_LEN);
     let mut out: Vec<(&'static str, usize)> = Vec::new();
@@ -406,10 +470,31 @@ pub fn breakdown(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<(&'sta
 
 /// Encode a canonical GOP. Sets are stored in the order given (sort them first).
 pub fn encode(c: &Canonical, bits: &QuantBits, zstd_level: i32) -> Result<Vec<u8>> {
+    encode_shaped(c, bits, zstd_level, None)
+}
+
+/// [`encode`], choosing each static Gaussian's levels by estimated bits plus
+/// `static_weight[i]` times the squared error in quantisation steps ([`grid_shaping`]) in every
+/// channel but the rotation index.
+pub fn encode_shaped(
+    c: &Canonical,
+    bits: &QuantBits,
+    zstd_level: i32,
+    static_weight: Option<&[f32]>,
+) -> Result<Vec<u8>> {
     let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
     for &b in &bits.all() {
         if !(1..=16).contains(&b) {
             return Err(bad(format!("quantisation bits must be 1..=16, got {b}")));
+        }
+    }
+    if let Some(s) = static_weight {
+        if s.len() != c.statics.len() || s.iter().any(|w| !(*w >= 0.0)) {
+            return Err(bad(format!(
+                "{} shaping weights (each >= 0) for {} static Gaussians",
+                s.len(),
+                c.statics.len()
+            )));
         }
     }
     c.statics.check_shapes()?;
@@ -417,8 +502,8 @@ pub fn encode(c: &Canonical, bits: &QuantBits, zstd_level: i32) -> Result<Vec<u8
     c.statics.check_finite()?;
     c.dynamics.check_finite()?;
     let mut out = vec![0u8]; // layout version
-    encode_set(&mut out, &c.statics, bits, zstd_level);
-    encode_set(&mut out, &c.dynamics, bits, zstd_level);
+    encode_set(&mut out, &c.statics, bits, zstd_level, static_weight);
+    encode_set(&mut out, &c.dynamics, bits, zstd_level, None);
     Ok(out)
 }
 

@@ -1,0 +1,65 @@
+//! How much each Gaussian of a still scene is worth in the grid shaper
+//! (`dlgs::payload::grid_shaping`): a Gaussian that adds little to any image may take a level
+//! the entropy coder pays less for, at a larger error.
+//!
+//! Importance is the Gaussian's blending weight summed over 36 views of its own
+//! ([`importance_views`], not the benchmark's), relative to the mean, `u`.
+//! Its shaping weight (bits one squared quantisation step of error is worth) is `u /
+//! tolerance`: the image error a level change adds scales with the pixels the Gaussian covers.
+
+use dlgs::Gaussians;
+use dlgs_render::contribution::contributions;
+use dlgs_render::{orbit_cameras, Camera, OrbitSpec};
+use glam::Vec3;
+
+/// The views the importance is measured from: orbits around three orthogonal up axes (a scene's
+/// up is not known), six azimuths at 30 degrees above and below each orbit plane, 640x480.
+pub fn importance_views(g: &Gaussians) -> Vec<Camera> {
+    let mut cams = Vec::new();
+    for up in [Vec3::NEG_Y, Vec3::Z, Vec3::X] {
+        for elevation_deg in [-30.0, 30.0] {
+            cams.extend(orbit_cameras(
+                g,
+                &OrbitSpec {
+                    count: 6,
+                    width: 640,
+                    height: 480,
+                    up,
+                    elevation_deg,
+                    ..OrbitSpec::default()
+                },
+            ));
+        }
+    }
+    cams
+}
+
+/// Shaping weight per Gaussian from its summed blending weights (any non-negative unit).
+pub fn shaping_weights(blend: &[f64], tolerance: f64) -> Vec<f32> {
+    let mean = blend.iter().sum::<f64>() / blend.len().max(1) as f64;
+    blend
+        .iter()
+        .map(|&w| {
+            let u = if mean > 0.0 && w > 0.0 { w / mean } else { 0.0 };
+            (u / tolerance) as f32
+        })
+        .collect()
+}
+
+/// Shaping weight per Gaussian of `g` for `tolerance` (> 0).
+pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
+    shaping_weights(&contributions(g, &importance_views(g)), tolerance)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_follow_the_relative_blending_weight() {
+        // mean 1.0 over [0, 0.01, 0.25, 3.74].
+        let w = shaping_weights(&[0.0, 0.01, 0.25, 3.74], 0.5);
+        assert_eq!(w, vec![0.0, 0.02, 0.5, 7.48]);
+        assert_eq!(shaping_weights(&[0.0, 0.0], 1.0), vec![0.0; 2]);
+    }
+}
