@@ -561,3 +561,48 @@ fn shaped_levels_stay_near_their_values_and_shrink_a_real_sh3_scene() {
     println!("PSNR plain {p_plain:.2} dB, shaped {p_shaped:.2} dB");
     assert!(p_shaped > p_plain - 3.0, "{p_shaped} vs {p_plain}");
 }
+
+#[test]
+fn shaping_handles_degenerate_and_tiny_sets() {
+    // Degenerate Gaussians and a constant channel on a real tile, then 1 and 0 Gaussians: the
+    // shaped file decodes to as many finite Gaussians, the constant channel stays exact.
+    let mut g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    for i in 0..50 {
+        g.rotations[i] = [0.0; 4];
+        g.log_scales[i] = [if i % 2 == 0 { -30.0 } else { 12.0 }; 3];
+    }
+    for p in &mut g.positions {
+        p[0] = 0.25;
+    }
+    let mut one = Gaussians::new(g.sh_degree, 0);
+    one.push_from(&g, 60);
+    let empty = Gaussians::new(g.sh_degree, 0);
+    for (name, s) in [("tile", &g), ("one", &one), ("empty", &empty)] {
+        let cfg = EncoderConfig {
+            canonical: CanonicalCodec::Sorted {
+                bits: QuantBits::MEDIUM,
+                sort: SortSpec::DEFAULT,
+            },
+            shape_tolerance: 0.1,
+            drop_invisible: false,
+            ..Default::default()
+        };
+        let bytes = dlgs_encoder::encode_still(s, cfg, Vec::new()).unwrap();
+        let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
+        let d = dec.gop_canonical(0).unwrap().statics.clone();
+        assert_eq!(d.len(), s.len(), "{name}");
+        assert!(d.positions.iter().all(|p| p[0] == 0.25), "{name}");
+        for v in [
+            d.log_scales.as_flattened(),
+            d.rotations.as_flattened(),
+            &d.sh,
+        ] {
+            assert!(v.iter().all(|x| x.is_finite()), "{name}");
+        }
+    }
+    // Bad weights are an input error, not a panic.
+    let c = Canonical::from_static(one.clone());
+    for w in [vec![f32::NAN], vec![-1.0], vec![1.0, 1.0]] {
+        assert!(sorted_grid::encode_shaped(&c, &QuantBits::HIGH, 3, Some(&w)).is_err());
+    }
+}
