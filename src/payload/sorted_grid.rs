@@ -337,9 +337,8 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
 }
 
 /// Quantise and code every channel of a set, in payload order. With `weight` (one per
-/// Gaussian: bits one squared quantisation step of its error is worth) each channel is also
-/// shaped ([`grid_shaping`]) for each codec family and the smallest coding kept; the rotation
-/// index is never moved.
+/// Gaussian: bits one squared quantisation step of its error is worth) the channels are shaped
+/// first ([`shape_channels`]).
 fn code_set(
     g: &Gaussians,
     bits: &QuantBits,
@@ -347,76 +346,82 @@ fn code_set(
     weight: Option<&[f32]>,
 ) -> Vec<Channel> {
     let w = grid_width(g.len()).max(1);
-    let chans = quantise_set(g, bits).channels;
-    let Some(weight) = weight else {
-        return (0..chans.len())
-            .into_par_iter()
-            .map(|j| {
-                let (b, min, max, q) = &chans[j];
-                // Codec 4 may code the difference from the previous channel when its bits match.
-                let prev = j
-                    .checked_sub(1)
-                    .map(|p| &chans[p])
-                    .filter(|p| p.0 == *b)
-                    .map(|p| p.3.as_slice());
-                let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
-                Channel {
-                    bits: *b,
-                    min: *min,
-                    max: *max,
-                    codec,
-                    data,
-                }
-            })
-            .collect();
-    };
+    let mut chans = quantise_set(g, bits).channels;
+    if let Some(weight) = weight {
+        shape_channels(g, &mut chans, weight, w, zstd_level);
+    }
+    (0..chans.len())
+        .into_par_iter()
+        .map(|j| {
+            let (b, min, max, q) = &chans[j];
+            // Codec 4 may code the difference from the previous channel when its bits match.
+            let prev = j
+                .checked_sub(1)
+                .map(|p| &chans[p])
+                .filter(|p| p.0 == *b)
+                .map(|p| p.3.as_slice());
+            let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
+            Channel {
+                bits: *b,
+                min: *min,
+                max: *max,
+                codec,
+                data,
+            }
+        })
+        .collect()
+}
+
+/// Replace each channel's nearest levels (but the rotation index's) by the [`grid_shaping`]
+/// variant, or the nearest levels themselves, that codes smallest. In payload order: codec 4
+/// and its shaper need the previous channel's final cells.
+fn shape_channels(
+    g: &Gaussians,
+    chans: &mut [(u8, f32, f32, Vec<u16>)],
+    weight: &[f32],
+    width: usize,
+    zstd_level: i32,
+) {
     assert_eq!(weight.len(), g.len(), "one weight per Gaussian");
     let kinds = channels(g);
-    // In order: codec 4 and its shaper need the previous channel's final cells.
-    let mut out: Vec<Channel> = Vec::with_capacity(chans.len());
-    let mut finals: Vec<Vec<u16>> = Vec::with_capacity(chans.len());
-    for (j, (b, min, max, q0)) in chans.iter().enumerate() {
+    for j in 0..chans.len() {
+        let (b, min, max, ref q0) = chans[j];
+        if kinds[j] == Kind::RotIndex || !(max > min) {
+            continue;
+        }
         let prev = j
             .checked_sub(1)
-            .filter(|&p| chans[p].0 == *b)
-            .map(|p| finals[p].as_slice());
-        let mut variants = vec![q0.clone()];
-        if kinds[j] != Kind::RotIndex && max > min {
-            let scale = levels(*b) / (max - min);
-            let exact: Vec<f32> = values(g, kinds[j])
-                .iter()
-                .map(|&v| ((v - min) * scale).clamp(0.0, levels(*b)))
-                .collect();
-            let cells = grid_shaping::Cells {
-                exact: &exact,
-                nearest: q0,
-                weight,
-                bits: *b,
-            };
-            variants.push(grid_shaping::for_prediction(&cells, w));
-            variants.push(grid_shaping::for_histogram(&cells, None));
-            if let Some(p) = prev {
-                variants.push(grid_shaping::for_histogram(&cells, Some(p)));
-            }
+            .filter(|&p| chans[p].0 == b)
+            .map(|p| chans[p].3.as_slice());
+        let scale = levels(b) / (max - min);
+        let exact: Vec<f32> = values(g, kinds[j])
+            .iter()
+            .map(|&v| ((v - min) * scale).clamp(0.0, levels(b)))
+            .collect();
+        let cells = grid_shaping::Cells {
+            exact: &exact,
+            nearest: q0,
+            weight,
+            bits: b,
+        };
+        let mut variants = vec![
+            q0.clone(),
+            grid_shaping::for_prediction(&cells, width),
+            grid_shaping::for_histogram(&cells, None),
+        ];
+        if let Some(p) = prev {
+            variants.push(grid_shaping::for_histogram(&cells, Some(p)));
         }
-        let (q, (codec, data)) = variants
+        let best = variants
             .into_par_iter()
-            .map(|q| {
-                let coded = grid_coder::encode_best(&q, prev, w, *b, zstd_level);
-                (q, coded)
+            .min_by_key(|q| {
+                grid_coder::encode_best(q, prev, width, b, zstd_level)
+                    .1
+                    .len()
             })
-            .min_by_key(|(_, (_, d))| d.len())
-            .expect("at least the unshaped cells");
-        out.push(Channel {
-            bits: *b,
-            min: *min,
-            max: *max,
-            codec,
-            data,
-        });
-        finals.push(q);
+            .expect("at least the nearest levels");
+        chans[j].3 = best;
     }
-    out
 }
 
 /// Bytes of a channel record before its data: bits, codec, min, max, len (§6.5.2).
