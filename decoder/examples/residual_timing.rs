@@ -1,6 +1,8 @@
 //! Where the time of a residual GOP goes: `cargo run --release -p dlgs-decoder --example
 //! residual_timing -- FILE.dlgs` times, for every residual GOP, reading and decoding its
-//! residual chunk and applying it to the reference state.
+//! residual chunk and applying it to the reference state. `-- FILE.dlgs eval` then times the
+//! field evaluation alone on GOP 1 (`NtcField::residuals_at` on every static and dynamic
+//! position), best of 9 runs, which is steadier on a noisy machine than one apply.
 
 use std::time::Instant;
 
@@ -16,6 +18,9 @@ fn main() -> dlgs::Result<()> {
     let scene = dec.scene().clone();
     let limits = *dec.reader().limits();
     let base = dec.gop_canonical(0)?;
+    if std::env::args().nth(2).as_deref() == Some("eval") {
+        return eval_only(&mut dec, &scene, &limits, &base);
+    }
     for g in 1..scene.gop_count {
         let chunks = dec.reader().gop_chunks(g)?;
         for c in chunks {
@@ -51,5 +56,42 @@ fn main() -> dlgs::Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+fn eval_only<R: std::io::Read + std::io::Seek>(
+    dec: &mut Decoder<R>,
+    scene: &dlgs::SceneHeader,
+    limits: &dlgs::Limits,
+    base: &dlgs::model::Canonical,
+) -> dlgs::Result<()> {
+    let c = dec
+        .reader()
+        .gop_chunks(1)?
+        .into_iter()
+        .find(|c| c.ty == ChunkType::RNTC)
+        .expect("GOP 1 has an RNTC chunk");
+    let p = dec.reader().payload(&c)?;
+    let f = ntc_residual::decode(&p, 0, scene, limits)?;
+    let positions: Vec<[f32; 3]> = base
+        .statics
+        .positions
+        .iter()
+        .chain(&base.dynamics.positions)
+        .copied()
+        .collect();
+    let mut best = f64::INFINITY;
+    let mut check = 0f64;
+    for _ in 0..9 {
+        let t = Instant::now();
+        let rows = f.residuals_at(&positions);
+        best = best.min(t.elapsed().as_secs_f64() * 1e3);
+        check = rows.iter().map(|&v| v as f64).sum();
+    }
+    println!(
+        "residuals_at on {} positions, {} threads: best of 9 {best:.2} ms (checksum {check:.6e})",
+        positions.len(),
+        rayon::current_num_threads()
+    );
     Ok(())
 }

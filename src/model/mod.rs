@@ -4,6 +4,7 @@ pub mod dynamic;
 pub mod gaussians;
 pub mod lang_decoder;
 pub mod ntc;
+mod ntc_lanes;
 pub mod residual;
 
 pub use dynamic::{DeformMlps, DynamicGop, Layer, Mlp, MlpRole, TimeFeatures, TimePoint};

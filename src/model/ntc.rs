@@ -8,12 +8,13 @@
 //! follows the reference's grid encoder as documented in ../shared/reference (§3.5 there).
 
 use bitvec::prelude::*;
-use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::residual::{AttrGroup, SET_DYNAMIC, SET_STATIC};
 use crate::model::Canonical;
+
+use super::ntc_lanes::{LaneField, LANES};
 
 /// Hash primes of the grid encoder, per dimension.
 pub const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
@@ -200,62 +201,6 @@ struct Tables {
     gate_words: Vec<u64>,
 }
 
-/// `SIGNS[m][f]` is +1 when bit f of `m` is set, else -1: one entry's features as floats.
-static SIGNS: [[f32; 8]; 256] = {
-    let mut t = [[0f32; 8]; 256];
-    let mut m = 0;
-    while m < 256 {
-        let mut f = 0;
-        while f < 8 {
-            t[m][f] = if m >> f & 1 == 1 { 1.0 } else { -1.0 };
-            f += 1;
-        }
-        m += 1;
-    }
-    t
-};
-
-/// The four corners of a 2D level read at `(ua, ub)` (§6.6.4 steps 1-2): entry indices and
-/// weights, with the weight of a dropped corner marked by `keep = false`.
-#[inline(always)]
-fn plane_corners(
-    ua: f32,
-    ub: f32,
-    r: u32,
-    mask: usize,
-    dense: bool,
-) -> ([usize; 4], [f32; 4], [bool; 4]) {
-    let axis = |u: f32| {
-        let pos = u * (r - 2) as f32 + 0.5;
-        let fl = (pos as u32) as f32;
-        let g = fl as u32;
-        let frac = pos - fl;
-        let k = [g, (g + 1).min(r - 1)];
-        (
-            [1.0 - frac, frac],
-            k,
-            [k[0] != 0 && k[0] != r - 1, k[1] != 0 && k[1] != r - 1],
-        )
-    };
-    let (wa, ka, oka) = axis(ua);
-    let (wb, kb, okb) = axis(ub);
-    let mut idx = [0usize; 4];
-    let mut w = [0f32; 4];
-    let mut keep = [false; 4];
-    for c in 0..4 {
-        let (i, j) = (c & 1, c >> 1);
-        // The plain path multiplies 1 * w_a * w_b; 1 * w_a is w_a exactly.
-        w[c] = wa[i] * wb[j];
-        keep[c] = oka[i] && okb[j];
-        idx[c] = if dense {
-            (ka[i] as u64 + kb[j] as u64 * r as u64) as usize & mask
-        } else {
-            (ka[i].wrapping_mul(PRIMES[0]) ^ kb[j].wrapping_mul(PRIMES[1])) as usize & mask
-        };
-    }
-    (idx, w, keep)
-}
-
 /// The gate at `u`: sigmoid of the interpolated gate bit, in f64 then rounded (portable).
 fn gate_value(t: &Tables, c: &NtcConfig, u: [f32; 3]) -> f32 {
     let mut gv = 0f32;
@@ -371,69 +316,11 @@ impl NtcField {
         Some(u)
     }
 
-    /// [`Self::features`] for grids of at most 4 features, bit-identical to it: the same
-    /// floating-point operations in the same order, with the corner indices of all levels
-    /// computed before any table byte is read (so the reads overlap instead of waiting on one
-    /// another), nibble-packed tables and a sign table instead of per-bit branches.
-    fn features_packed(&self, t: &Tables, p: [f32; 3], out: &mut [f32]) -> bool {
-        let Some(u) = self.unit_position(p) else {
-            return false;
-        };
-        let c = &self.config;
-        let nf = c.features as usize;
-        let lv = c.levels();
-        let mask = c.table() - 1;
-        let gate = gate_value(t, c, u);
-        const MAX: usize = 3 * 16;
-        let mut idx = [[0usize; 4]; MAX];
-        let mut wts = [[0f32; 4]; MAX];
-        let mut keep = [[false; 4]; MAX];
-        for (pi, &(a, b)) in PLANES.iter().enumerate() {
-            for (l, &r) in c.resolutions.iter().enumerate() {
-                let dense = (r as u64).pow(2) <= c.table() as u64;
-                let k = pi * lv + l;
-                (idx[k], wts[k], keep[k]) = plane_corners(u[a], u[b], r, mask, dense);
-            }
-        }
-        let mut ent = [[0u8; 4]; MAX];
-        for k in 0..3 * lv {
-            let tab = &t.packed[k];
-            for q in 0..4 {
-                let e = idx[k][q];
-                ent[k][q] = tab[e >> 1] >> ((e & 1) * 4) & 0xf;
-            }
-        }
-        for k in 0..3 * lv {
-            let mut acc = [0f32; 4];
-            let mut wsum = 0f32;
-            for q in 0..4 {
-                if !keep[k][q] {
-                    continue;
-                }
-                let w = wts[k][q];
-                wsum += w;
-                let s = &SIGNS[ent[k][q] as usize];
-                for f in 0..4 {
-                    acc[f] += w * s[f];
-                }
-            }
-            let s = wsum + WEIGHT_EPS;
-            for (o, &v) in out[k * nf..(k + 1) * nf].iter_mut().zip(&acc) {
-                *o = v / s * gate;
-            }
-        }
-        true
-    }
-
-    /// The MLP input of a position, or `None` outside the box (§6.6.3).
-    fn features(&self, t: &Tables, p: [f32; 3], out: &mut [f32]) -> bool {
-        let Some(u) = self.unit_position(p) else {
-            return false;
-        };
+    /// The MLP input at unit position `u` with gate `gate` (§6.6.4), the plain way.
+    fn features(&self, t: &Tables, u: [f32; 3], gate: f32, out: &mut [f32]) {
         let c = &self.config;
         let nf = c.features as usize;
         let sign = |bit: bool| if bit { 1.0f32 } else { -1.0 };
-        let gate = gate_value(t, c, u);
         for (pi, &(a, b)) in PLANES.iter().enumerate() {
             for (l, &r) in c.resolutions.iter().enumerate() {
                 let tab = &t.planes[pi * c.levels() + l];
@@ -451,7 +338,6 @@ impl NtcField {
                 }
             }
         }
-        true
     }
 
     /// `out = W2 relu(W1 x + b1) + b2`: each output starts at its bias and takes the fused
@@ -477,51 +363,35 @@ impl NtcField {
     pub fn residuals_at(&self, positions: &[[f32; 3]]) -> Vec<f32> {
         const BLOCK: usize = 256;
         let t = self.tables();
-        let m = &self.mlp;
-        let (ni, nh, no) = (m.inputs, m.hidden, m.outputs);
-        let l1 = PackedLayer::new(&m.w1, &m.b1, ni);
-        let l2 = PackedLayer::new(&m.w2, &m.b2, nh);
+        let no = self.mlp.outputs;
+        let nibbles = !t.packed.is_empty();
+        let levels = if nibbles { &t.packed } else { &t.planes };
+        let field = LaneField::new(&self.config, &self.mlp, levels, nibbles, &t.gate_words);
         let mut rows = vec![0f32; positions.len() * no];
         rows.par_chunks_mut(BLOCK * no)
             .zip(positions.par_chunks(BLOCK))
             .for_each(|(chunk, pos)| {
-                // LANES rows inside the box go through the MLP together, one per SIMD lane.
-                let mut x = vec![0f32; ni];
-                let mut xt = vec![[0f32; LANES]; ni];
-                let mut ht = vec![[0f32; LANES]; nh];
-                let mut yt = vec![[0f32; LANES]; no];
-                let mut which = [0usize; LANES];
-                let mut k = 0;
-                let mut flush =
-                    |k: usize, which: &[usize], xt: &[[f32; LANES]], chunk: &mut [f32]| {
-                        mlp_lanes(xt, &l1, &l2, &mut ht, &mut yt);
-                        for (l, &i) in which[..k].iter().enumerate() {
-                            for (o, y) in yt.iter().enumerate() {
-                                chunk[i * no + o] = y[l];
-                            }
+                // The rows inside the box go through the field LANES at a time; a short last
+                // batch repeats its last position in the spare lanes, which are never read.
+                let inside: Vec<(usize, [f32; 3])> = pos
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, &p)| Some((i, self.unit_position(p)?)))
+                    .collect();
+                let mut batch = field.batch(&self.mlp);
+                for group in inside.chunks(LANES) {
+                    for l in 0..LANES {
+                        let (_, u) = group[l.min(group.len() - 1)];
+                        for a in 0..3 {
+                            batch.u[a][l] = u[a];
                         }
-                    };
-                for (i, &p) in pos.iter().enumerate() {
-                    let inside = if t.packed.is_empty() {
-                        self.features(&t, p, &mut x)
-                    } else {
-                        self.features_packed(&t, p, &mut x)
-                    };
-                    if !inside {
-                        continue;
                     }
-                    for (col, &v) in xt.iter_mut().zip(&x) {
-                        col[k] = v;
+                    field.eval(&mut batch);
+                    for (l, &(i, _)) in group.iter().enumerate() {
+                        for (o, y) in batch.yt.iter().enumerate() {
+                            chunk[i * no + o] = y[l];
+                        }
                     }
-                    which[k] = i;
-                    k += 1;
-                    if k == LANES {
-                        flush(k, &which, &xt, chunk);
-                        k = 0;
-                    }
-                }
-                if k > 0 {
-                    flush(k, &which, &xt, chunk);
                 }
             });
         rows
@@ -534,7 +404,8 @@ impl NtcField {
         let mut x = vec![0f32; self.mlp.inputs];
         let mut h = vec![0f32; self.mlp.hidden];
         let mut out = vec![0f32; self.mlp.outputs];
-        if self.features(&t, p, &mut x) {
+        if let Some(u) = self.unit_position(p) {
+            self.features(&t, u, gate_value(&t, &self.config, u), &mut x);
             self.mlp_into(&x, &mut h, &mut out);
         }
         out
@@ -567,85 +438,6 @@ impl NtcField {
             }
         }
         Ok(out)
-    }
-}
-
-/// Rows the NTC MLP evaluates together, one per SIMD lane.
-const LANES: usize = 8;
-/// Units (hidden or output) accumulated at once: independent FMA chains hide their latency.
-const UNITS: usize = 8;
-
-/// One MLP layer with its units in blocks of `UNITS`: `w[block * inputs + i][q]` is the weight
-/// of input i for unit `block * UNITS + q`, so the inner loop reads one contiguous row of
-/// weights per input with no bounds checks. Units past the layer's width have zero weights and
-/// are never read back.
-struct PackedLayer {
-    w: Vec<[f32; UNITS]>,
-    b: Vec<[f32; UNITS]>,
-}
-
-impl PackedLayer {
-    /// From PyTorch layout (`w[u * inputs + i]`).
-    fn new(w: &[f32], b: &[f32], inputs: usize) -> Self {
-        let blocks = b.len().div_ceil(UNITS);
-        let mut pw = vec![[0f32; UNITS]; blocks * inputs];
-        let mut pb = vec![[0f32; UNITS]; blocks];
-        for (u, &bias) in b.iter().enumerate() {
-            pb[u / UNITS][u % UNITS] = bias;
-            for i in 0..inputs {
-                pw[u / UNITS * inputs + i][u % UNITS] = w[u * inputs + i];
-            }
-        }
-        PackedLayer { w: pw, b: pb }
-    }
-}
-
-/// The NTC MLP on `LANES` rows at once, transposed (`xt[i][lane]`, `ht[j][lane]`,
-/// `yt[o][lane]`). Each lane takes exactly the fused multiply-adds of [`NtcField::mlp_into`] in
-/// the same order (unit starts at its bias, inputs in order), so the rows are bit-identical to
-/// it; unused lanes compute garbage that is never read. Compiled for several CPUs and picked at
-/// run time; `mul_add` is exact everywhere, so every path gives the same bits.
-#[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
-fn mlp_lanes(
-    xt: &[[f32; LANES]],
-    l1: &PackedLayer,
-    l2: &PackedLayer,
-    ht: &mut [[f32; LANES]],
-    yt: &mut [[f32; LANES]],
-) {
-    layer_lanes(xt, l1, ht, false);
-    layer_lanes(ht, l2, yt, true);
-}
-
-/// `out[u] = b[u] + sum_i w[u][i] * f(input[i])` per lane, `f` = ReLU when `relu_input`.
-#[inline(always)]
-fn layer_lanes(
-    input: &[[f32; LANES]],
-    layer: &PackedLayer,
-    out: &mut [[f32; LANES]],
-    relu_input: bool,
-) {
-    let ni = input.len();
-    for (blk, (wb, bias)) in layer.w.chunks_exact(ni).zip(&layer.b).enumerate() {
-        let mut acc = [[0f32; LANES]; UNITS];
-        for (a, &bq) in acc.iter_mut().zip(bias) {
-            *a = [bq; LANES];
-        }
-        for (x, wv) in input.iter().zip(wb) {
-            let x = if relu_input {
-                x.map(|v| v.max(0.0))
-            } else {
-                *x
-            };
-            for (a, &wq) in acc.iter_mut().zip(wv) {
-                for (al, &xl) in a.iter_mut().zip(&x) {
-                    *al = wq.mul_add(xl, *al);
-                }
-            }
-        }
-        let base = blk * UNITS;
-        let n = UNITS.min(out.len() - base);
-        out[base..base + n].copy_from_slice(&acc[..n]);
     }
 }
 

@@ -11,7 +11,7 @@ use std::io::Cursor;
 
 use bitvec::prelude::*;
 use dlgs::container::header::ResidualMode;
-use dlgs::model::ntc::NtcField;
+use dlgs::model::ntc::{NtcConfig, NtcField};
 use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
 use dlgs::payload::{binary_bits, ntc_residual};
 use dlgs::{Canonical, Limits};
@@ -188,6 +188,49 @@ fn ntc_residuals_are_the_plain_evaluation_on_any_thread_count() {
     }
     assert!(field.residual_at(lo).iter().any(|&v| v != 0.0));
     assert!(field.residual_at(hi).iter().any(|&v| v != 0.0));
+}
+
+/// The lane evaluation against the plain one on the layouts the reference's shapes do not
+/// reach: 6 features per entry (byte tables instead of nibbles), dense levels and a dense gate
+/// (small resolutions), positions on the box's faces and corners, and a count that leaves a
+/// short last batch.
+#[test]
+fn ntc_lane_evaluation_matches_the_plain_one_on_every_table_layout() {
+    let m = model(ResidualMode::Sequential, 1);
+    for (features, gate_resolution) in [(6u8, 9u32), (3, 18), (8, 600)] {
+        let config = NtcConfig {
+            resolutions: vec![16, 32, 200],
+            features,
+            log2_table: 10,
+            gate_resolution,
+            gate_log2_table: 10,
+        };
+        let field = synth_ntc(&m.canonical, &mut fastrand::Rng::with_seed(5), 1.0, config);
+        let (lo, hi) = (field.bound_min, field.bound_max);
+        let mut pos: Vec<[f32; 3]> = m.canonical.merged().positions;
+        pos.truncate(997);
+        for corner in 0..8 {
+            let pick = |a: usize| if corner >> a & 1 == 1 { hi[a] } else { lo[a] };
+            pos.push([pick(0), pick(1), pick(2)]);
+        }
+        pos.push([(lo[0] + hi[0]) / 2.0, lo[1], hi[2]]);
+        let rows = field.residuals_at(&pos);
+        let no = field.mlp.outputs;
+        let mut nonzero = 0;
+        for (i, &p) in pos.iter().enumerate() {
+            let plain = field.residual_at(p);
+            let row = &rows[i * no..(i + 1) * no];
+            assert!(
+                plain
+                    .iter()
+                    .zip(row)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{features} features, gate {gate_resolution}: row {i} at {p:?}"
+            );
+            nonzero += row.iter().any(|&v| v != 0.0) as usize;
+        }
+        assert!(nonzero > pos.len() / 2, "the field must act: {nonzero}");
+    }
 }
 
 #[test]
