@@ -147,6 +147,22 @@ fn constant_and_degenerate_grids_round_trip() {
     assert!(ntc_residual::encode(&f, &m.scene, 3).is_err());
 }
 
+/// Every row of `rows` (from `residuals_at`) has the bits of the plain one-position evaluation.
+fn assert_plain_rows(field: &NtcField, pos: &[[f32; 3]], rows: &[f32], what: &str) {
+    let no = field.mlp.outputs;
+    for (i, &p) in pos.iter().enumerate() {
+        let plain = field.residual_at(p);
+        let row = &rows[i * no..(i + 1) * no];
+        assert!(
+            plain
+                .iter()
+                .zip(row)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{what}: row {i} at {p:?}"
+        );
+    }
+}
+
 #[test]
 fn ntc_residuals_are_the_plain_evaluation_on_any_thread_count() {
     let m = model(ResidualMode::Sequential, 2);
@@ -164,18 +180,7 @@ fn ntc_residuals_are_the_plain_evaluation_on_any_thread_count() {
         .iter()
         .zip(&two)
         .all(|(a, b)| a.to_bits() == b.to_bits()));
-    let no = field.mlp.outputs;
-    for (i, &p) in pos.iter().enumerate() {
-        let plain = field.residual_at(p);
-        let row = &one[i * no..(i + 1) * no];
-        assert!(
-            plain
-                .iter()
-                .zip(row)
-                .all(|(a, b)| a.to_bits() == b.to_bits()),
-            "row {i}"
-        );
-    }
+    assert_plain_rows(field, &pos, &one, "");
     // Outside the normalisation box (and at NaN) there is no residual at all, not even the
     // output bias; on the box's faces there is one.
     let (lo, hi) = (field.bound_min, field.bound_max);
@@ -215,20 +220,16 @@ fn ntc_lane_evaluation_matches_the_plain_one_on_every_table_layout() {
         }
         pos.push([(lo[0] + hi[0]) / 2.0, lo[1], hi[2]]);
         let rows = field.residuals_at(&pos);
-        let no = field.mlp.outputs;
-        let mut nonzero = 0;
-        for (i, &p) in pos.iter().enumerate() {
-            let plain = field.residual_at(p);
-            let row = &rows[i * no..(i + 1) * no];
-            assert!(
-                plain
-                    .iter()
-                    .zip(row)
-                    .all(|(a, b)| a.to_bits() == b.to_bits()),
-                "{features} features, gate {gate_resolution}: row {i} at {p:?}"
-            );
-            nonzero += row.iter().any(|&v| v != 0.0) as usize;
-        }
+        assert_plain_rows(
+            &field,
+            &pos,
+            &rows,
+            &format!("{features} features, gate {gate_resolution}"),
+        );
+        let nonzero = rows
+            .chunks_exact(field.mlp.outputs)
+            .filter(|row| row.iter().any(|&v| v != 0.0))
+            .count();
         assert!(nonzero > pos.len() / 2, "the field must act: {nonzero}");
     }
 }
