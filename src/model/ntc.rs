@@ -378,7 +378,7 @@ impl NtcField {
                     .enumerate()
                     .filter_map(|(i, &p)| Some((i, self.unit_position(p)?)))
                     .collect();
-                let mut batch = field.batch(&self.mlp);
+                let mut batch = field.batch();
                 for group in inside.chunks(LANES) {
                     for l in 0..LANES {
                         let (_, u) = group[l.min(group.len() - 1)];

@@ -26,6 +26,10 @@ pub(super) struct LaneField<'a> {
     gate_words: &'a [u64],
     l1: PackedLayer,
     l2: PackedLayer,
+    /// The MLP's widths, for sizing batches.
+    inputs: usize,
+    hidden: usize,
+    outputs: usize,
 }
 
 /// Scratch of one batch: unit positions, MLP input, hidden units and output, lane-minor.
@@ -51,15 +55,18 @@ impl<'a> LaneField<'a> {
             gate_words,
             l1: PackedLayer::new(&mlp.w1, &mlp.b1, mlp.inputs),
             l2: PackedLayer::new(&mlp.w2, &mlp.b2, mlp.hidden),
+            inputs: mlp.inputs,
+            hidden: mlp.hidden,
+            outputs: mlp.outputs,
         }
     }
 
-    pub(super) fn batch(&self, mlp: &NtcMlp) -> Batch {
+    pub(super) fn batch(&self) -> Batch {
         Batch {
             u: [[0.5; LANES]; 3],
-            xt: vec![[0.0; LANES]; mlp.inputs],
-            ht: vec![[0.0; LANES]; mlp.hidden],
-            yt: vec![[0.0; LANES]; mlp.outputs],
+            xt: vec![[0.0; LANES]; self.inputs],
+            ht: vec![[0.0; LANES]; self.hidden],
+            yt: vec![[0.0; LANES]; self.outputs],
         }
     }
 
