@@ -73,6 +73,10 @@ enum Cmd {
         count: usize,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Decoded GOPs the warm decoder keeps (time features and decoders included): more
+        /// makes jumps back into a kept GOP cheap, at the memory of those GOPs.
+        #[arg(long, default_value_t = 1)]
+        gop_cache: usize,
     },
     /// Render A and B at the last frame of every GOP and the first frame of the next:
     /// PSNR of B against A at both, and the jump across the boundary within each.
@@ -200,7 +204,12 @@ fn main() -> Result<()> {
                 anyhow::bail!("several inputs must all be reference GOP folders")
             }
         }
-        Cmd::Seek { file, count, seed } => seek_cmd::run_seek(&file, count, seed),
+        Cmd::Seek {
+            file,
+            count,
+            seed,
+            gop_cache,
+        } => seek_cmd::run_seek(&file, count, seed, gop_cache),
         Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
         Cmd::Synth(args) => encode_cmd::run_synth(&args),
         Cmd::Decode { file, t, output } => export_cmd::run_decode(&file, t, &output),

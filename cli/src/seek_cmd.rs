@@ -23,7 +23,7 @@ fn stats(ms: &mut [f64]) -> String {
     )
 }
 
-pub fn run_seek(file: &Path, count: usize, seed: u64) -> Result<()> {
+pub fn run_seek(file: &Path, count: usize, seed: u64, gop_cache: usize) -> Result<()> {
     let open = || Decoder::open_path(file).with_context(|| format!("opening {}", file.display()));
     let dec = open()?;
     let s = dec.scene().clone();
@@ -64,8 +64,9 @@ pub fn run_seek(file: &Path, count: usize, seed: u64) -> Result<()> {
         d.gop(0)?;
         started.push(seek(&mut d, t)?);
     }
-    // Warm: one decoder seeking again and again (state cache of 4 GOPs).
+    // Warm: one decoder seeking again and again (state cache of 4 GOPs, GOP cache as asked).
     let mut d = open()?;
+    d.set_gop_cache(gop_cache);
     for &t in &times {
         seek(&mut d, t)?;
     }
@@ -88,7 +89,8 @@ pub fn run_seek(file: &Path, count: usize, seed: u64) -> Result<()> {
         stats(&mut started)
     );
     println!(
-        "warm seek (same times again, cache of 4):   {}",
+        "warm seek (same times again, state cache 4, GOP cache {}): {}",
+        gop_cache.max(1),
         stats(&mut warm)
     );
     Ok(())

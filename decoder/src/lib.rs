@@ -4,6 +4,7 @@
 mod build;
 pub mod deform;
 pub mod interp;
+mod lru;
 pub mod panel;
 pub mod planar;
 pub mod stream;
@@ -22,6 +23,7 @@ use dlgs::payload::lang_decoder;
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
+use lru::GopLru;
 
 /// One decoded GOP: canonical Gaussians and, if the scene has dynamics, its deformation field.
 pub struct DecodedGop {
@@ -41,48 +43,6 @@ pub(crate) struct State {
     pub(crate) canonical: Arc<Canonical>,
     pub(crate) source: ChunkType,
     pub(crate) ntc: Option<Arc<NtcField>>,
-}
-
-/// Decoded canonical states of recent GOPs (GOP 0 is kept while the cache holds anything: it
-/// is every parallel-mode GOP's reference). Least recently used states are dropped first.
-struct StateCache {
-    capacity: usize,
-    clock: u64,
-    entries: Vec<(u32, State, u64)>,
-}
-
-impl StateCache {
-    fn get(&mut self, g: u32) -> Option<State> {
-        self.clock += 1;
-        let now = self.clock;
-        self.entries.iter_mut().find(|e| e.0 == g).map(|e| {
-            e.2 = now;
-            e.1.clone()
-        })
-    }
-    fn has(&self, g: u32) -> bool {
-        self.entries.iter().any(|e| e.0 == g)
-    }
-    fn insert(&mut self, g: u32, s: State) {
-        if self.capacity == 0 || self.has(g) {
-            return;
-        }
-        self.clock += 1;
-        if self.entries.len() >= self.capacity {
-            // Evict the least recently used, sparing GOP 0 unless it is the only entry.
-            if let Some(i) = self
-                .entries
-                .iter()
-                .enumerate()
-                .filter(|(_, e)| e.0 != 0 || self.capacity == 1)
-                .min_by_key(|(_, e)| e.2)
-                .map(|(i, _)| i)
-            {
-                self.entries.swap_remove(i);
-            }
-        }
-        self.entries.push((g, s, self.clock));
-    }
 }
 
 impl DecodedGop {
@@ -140,9 +100,12 @@ impl Frame {
 /// Decodes GOPs and frames from a seekable `.dlgs` source.
 pub struct Decoder<R: Read + Seek> {
     reader: FileReader<R>,
-    /// The last decoded GOP, reused while playback stays in it.
-    cached: Option<Arc<DecodedGop>>,
-    states: StateCache,
+    /// Recently decoded GOPs with their time features and decoders (by default only the
+    /// last one, reused while playback stays in it).
+    gops: GopLru<Arc<DecodedGop>>,
+    /// Decoded canonical states of recent GOPs (GOP 0 is kept while the cache holds anything:
+    /// it is every parallel-mode GOP's reference).
+    states: GopLru<State>,
 }
 
 impl Decoder<BufReader<File>> {
@@ -161,12 +124,8 @@ impl<R: Read + Seek> Decoder<R> {
     pub fn new(src: R, limits: Limits) -> Result<Self> {
         Ok(Decoder {
             reader: FileReader::open_with_limits(src, limits)?,
-            cached: None,
-            states: StateCache {
-                capacity: 4,
-                clock: 0,
-                entries: Vec::new(),
-            },
+            gops: GopLru::new(1, None),
+            states: GopLru::new(4, Some(0)),
         })
     }
 
@@ -207,10 +166,8 @@ impl<R: Read + Seek> Decoder<R> {
     /// [`Self::gop`], decoding the time-feature keys of `keys` alongside the canonical state
     /// (all keys are decoded anyway unless the features are intra-only).
     fn gop_for_keys(&mut self, g: u32, keys: std::ops::Range<usize>) -> Result<Arc<DecodedGop>> {
-        if let Some(c) = &self.cached {
-            if c.index == g {
-                return Ok(c.clone());
-            }
+        if let Some(c) = self.gops.get(g) {
+            return Ok(c);
         }
         let chunks = self.reader.gop_chunks(g)?;
         let gop_at = self.reader.gop_entry(g)?.offset;
@@ -240,15 +197,27 @@ impl<R: Read + Seek> Decoder<R> {
             (state, dynamic)
         });
         let gop = Arc::new(build::assemble(&scene, g, state?, dynamic?));
-        self.cached = Some(gop.clone());
+        self.gops.insert(g, gop.clone());
         Ok(gop)
     }
 
     /// How many decoded canonical states to keep (default 4; GOP 0 is kept preferentially).
     /// Sequential seeks walk the residual chain from the nearest cached GOP.
     pub fn set_state_cache(&mut self, capacity: usize) {
-        self.states.capacity = capacity;
-        self.states.entries.clear();
+        self.states.reset(capacity);
+    }
+
+    /// How many decoded GOPs (canonical state, time features as far as decoded, decoders) to
+    /// keep, least recently used dropped first; at least 1, the default. More makes a jump
+    /// back into a kept GOP cost only the frame, at the memory of those GOPs: on the
+    /// 273k-Gaussian benchmark stream (81,876 dynamic) about 45 MB per GOP (BENCHMARKS.md).
+    pub fn set_gop_cache(&mut self, capacity: usize) {
+        self.gops.reset(capacity.max(1));
+    }
+
+    /// The GOPs the GOP cache holds, ascending.
+    pub fn cached_gops(&self) -> Vec<u32> {
+        self.gops.keys()
     }
 
     /// The decoded canonical state of GOP `g`: its own canonical chunk, or its residual

@@ -294,9 +294,10 @@ fn seeking_in_any_order_gives_the_frames_of_playback() {
                 )
             })
             .collect();
-        for cache in [0, 1, 4] {
+        for (cache, gop_cache) in [(0, 1), (1, 1), (4, 1), (0, 3), (4, 5)] {
             let mut d = open(&bytes);
             d.set_state_cache(cache);
+            d.set_gop_cache(gop_cache);
             for &t in &times {
                 let f = d.seek(t, &opts()).unwrap();
                 let body = dlgs::payload::raw_canonical::canonical_body(&Canonical {
@@ -310,11 +311,37 @@ fn seeking_in_any_order_gives_the_frames_of_playback() {
                     .collect();
                 assert!(
                     got.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
-                    "{mode:?} t = {t}, cache {cache}"
+                    "{mode:?} t = {t}, state cache {cache}, GOP cache {gop_cache}"
                 );
             }
         }
     }
+}
+
+#[test]
+fn a_kept_gop_is_reused_and_the_least_recently_used_one_dropped() {
+    // 5 GOPs of 2 s; GOP g holds [2g, 2g + 2).
+    let m = model(ResidualMode::Parallel, 5);
+    let bytes = write_model(&m, exact_cfg(), Vec::new()).unwrap();
+    let mut d = open(&bytes);
+    d.set_gop_cache(3);
+    let first: Vec<_> = [1.0, 3.0, 5.0, 7.0]
+        .iter()
+        .map(|&t| d.seek(t, &opts()).unwrap().gop)
+        .collect();
+    assert_eq!(d.cached_gops(), vec![1, 2, 3]);
+    // Back into GOP 1: the kept decode, not a new one.
+    let again = d.seek(3.5, &opts()).unwrap().gop;
+    assert!(std::sync::Arc::ptr_eq(&again, &first[1]));
+    // GOP 0 was dropped: decoded anew, and GOP 2 (least recently used) makes room.
+    let zero = d.seek(0.5, &opts()).unwrap().gop;
+    assert!(!std::sync::Arc::ptr_eq(&zero, &first[0]));
+    assert_eq!(d.cached_gops(), vec![0, 1, 3]);
+    // The default keeps only the GOP last used.
+    let mut d = open(&bytes);
+    d.seek(1.0, &opts()).unwrap();
+    d.seek(3.0, &opts()).unwrap();
+    assert_eq!(d.cached_gops(), vec![1]);
 }
 
 #[test]
