@@ -62,6 +62,18 @@ pub struct CodecArgs {
     /// at 640x480.
     #[arg(long, value_name = "TOL", default_value_t = 0.0)]
     pub shape: f64,
+    /// Lossy still scenes: store the least important Gaussians (blending weight over 36 views
+    /// of its own), which together hold at most FRACTION of the total weight, as a second grid
+    /// one bit coarser in every group (format-spec §6.5.2, layout 1). More fractions, each
+    /// smaller, add grids 2, 3, .. bits coarser (`0.04,0.004`). 0 = one grid. Costs 36 renders
+    /// at 640x480; not combined with --shape.
+    #[arg(
+        long,
+        value_name = "FRACTION[,FRACTION..]",
+        value_delimiter = ',',
+        default_value = "0"
+    )]
+    pub tiers: Vec<f64>,
     /// Store raw canonical floats without zstd.
     #[arg(long)]
     pub no_zstd: bool,
@@ -128,10 +140,18 @@ pub fn parse_residual_mode(s: &str) -> Result<ResidualMode> {
 }
 
 impl CodecArgs {
+    /// Whether `--tiers` asks for more than one grid.
+    fn tiered(&self) -> bool {
+        self.tiers.iter().any(|&f| f > 0.0)
+    }
+
     fn canonical(&self) -> Result<CanonicalCodec> {
         let mut bits = match (self.quality.as_str(), &self.bits) {
             ("lossless", None) if self.shape > 0.0 => {
                 bail!("--shape chooses quantised levels: give a lossy --quality (or --bits)")
+            }
+            ("lossless", None) if self.tiered() => {
+                bail!("--tiers stores coarser levels: give a lossy --quality (or --bits)")
             }
             ("lossless", None) => return Ok(CanonicalCodec::Raw),
             ("lossless", Some(_)) => QuantBits::HIGH,
@@ -204,6 +224,25 @@ impl CodecArgs {
         if !(self.shape.is_finite() && self.shape >= 0.0) {
             bail!("--shape takes a tolerance >= 0, got {}", self.shape);
         }
+        if let Some(f) = self
+            .tiers
+            .iter()
+            .find(|f| !(f.is_finite() && (0.0..1.0).contains(*f)))
+        {
+            bail!("--tiers takes weight fractions in [0, 1), got {f}");
+        }
+        if self.tiers.windows(2).any(|w| w[1] > w[0]) {
+            bail!("--tiers fractions must not increase (each coarser grid holds less weight)");
+        }
+        if self.tiers.len() >= dlgs::payload::sorted_grid::MAX_PARTS {
+            bail!(
+                "--tiers: at most {} fractions",
+                dlgs::payload::sorted_grid::MAX_PARTS - 1
+            );
+        }
+        if self.tiered() && self.shape > 0.0 {
+            bail!("--tiers and --shape cannot be combined");
+        }
         Ok(EncoderConfig {
             canonical: self.canonical()?,
             raw_codec: if self.no_zstd {
@@ -240,6 +279,7 @@ impl CodecArgs {
             drop_invisible: !self.keep_invisible,
             reallocate_bits: self.reallocate_bits,
             shape_tolerance: self.shape,
+            tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
         })
     }
 
@@ -325,17 +365,18 @@ pub fn encode_file(
     if !is_dlgs(input) {
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
-        let spinner = if verbose && (codec.reallocate_bits > 0 || codec.shape > 0.0) {
-            let s = ProgressBar::new_spinner().with_message(if codec.reallocate_bits > 0 {
-                "reallocating bits (coding and rendering candidates)"
+        let spinner =
+            if verbose && (codec.reallocate_bits > 0 || codec.shape > 0.0 || codec.tiered()) {
+                let s = ProgressBar::new_spinner().with_message(if codec.reallocate_bits > 0 {
+                    "reallocating bits (coding and rendering candidates)"
+                } else {
+                    "measuring importance (36 renders)"
+                });
+                s.enable_steady_tick(std::time::Duration::from_millis(200));
+                s
             } else {
-                "measuring importance for --shape (36 renders)"
-            });
-            s.enable_steady_tick(std::time::Duration::from_millis(200));
-            s
-        } else {
-            ProgressBar::hidden()
-        };
+                ProgressBar::hidden()
+            };
         let (_, report) =
             dlgs_encoder::encode_still_reporting(&g, codec.config(meta(input, settings))?, out)?;
         spinner.finish_and_clear();

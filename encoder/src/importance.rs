@@ -7,10 +7,13 @@
 //! Its shaping weight (bits one squared quantisation step of error is worth) is `u /
 //! tolerance`: the image error a level change adds scales with the pixels the Gaussian covers.
 
+use dlgs::payload::sorted_grid::QuantBits;
 use dlgs::Gaussians;
 use dlgs_render::contribution::contributions;
 use dlgs_render::{orbit_cameras, Camera, OrbitSpec};
 use glam::Vec3;
+
+use crate::grid_sort::{grid_order, permute, SortSpec};
 
 /// The views the importance is measured from: orbits around three orthogonal up axes (a scene's
 /// up is not known), six azimuths at 30 degrees above and below each orbit plane, 640x480.
@@ -49,6 +52,65 @@ pub fn shaping_weights(blend: &[f64], tolerance: f64) -> Vec<f32> {
 /// Shaping weight per Gaussian of `g` for `tolerance` (> 0).
 pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
     shaping_weights(&contributions(g, &importance_views(g)), tolerance)
+}
+
+/// Split a still scene's static set into parts (layout 1) by importance: `fractions[j]`
+/// (descending, each in (0, 1)) is the share of the summed blending weight held by the least
+/// important Gaussians stored `j + 1` bits coarser than `bits` (those of a later, smaller
+/// fraction go to the later part). The most important Gaussians are the first part, at `bits`.
+/// Each part is grid-sorted on its own; empty parts are left out. Also returns the stored
+/// order (indices into `g`).
+pub fn tiers(
+    g: &Gaussians,
+    fractions: &[f64],
+    sort: SortSpec,
+    bits: QuantBits,
+) -> (Vec<(Gaussians, QuantBits)>, Vec<u32>) {
+    let blend = contributions(g, &importance_views(g));
+    // Tier of each Gaussian: how many of the fractions it falls under.
+    let mut tier = vec![0usize; g.len()];
+    for &f in fractions {
+        for i in least_weight(&blend, f) {
+            tier[i as usize] += 1;
+        }
+    }
+    let mut parts = Vec::new();
+    let mut order = Vec::with_capacity(g.len());
+    for t in 0..=fractions.len() {
+        let idx: Vec<u32> = (0..g.len() as u32)
+            .filter(|&i| tier[i as usize] == t)
+            .collect();
+        if idx.is_empty() && !(t == 0 && g.is_empty()) {
+            continue;
+        }
+        let subset = permute(g, &idx);
+        let local = grid_order(&subset, sort);
+        order.extend(local.iter().map(|&j| idx[j as usize]));
+        parts.push((permute(&subset, &local), bits.coarser(t as u8)));
+    }
+    (parts, order)
+}
+
+/// Indices (ascending) of the lowest-weight entries that together hold at most `fraction` of
+/// the total; ties broken by index, so the choice is deterministic.
+pub fn least_weight(blend: &[f64], fraction: f64) -> Vec<u32> {
+    let total: f64 = blend.iter().sum();
+    let mut by_weight: Vec<u32> = (0..blend.len() as u32).collect();
+    by_weight.sort_by(|&a, &b| {
+        blend[a as usize]
+            .total_cmp(&blend[b as usize])
+            .then(a.cmp(&b))
+    });
+    let mut acc = 0.0;
+    let mut low: Vec<u32> = by_weight
+        .into_iter()
+        .take_while(|&i| {
+            acc += blend[i as usize];
+            acc <= fraction * total
+        })
+        .collect();
+    low.sort_unstable();
+    low
 }
 
 #[cfg(test)]

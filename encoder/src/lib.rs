@@ -169,6 +169,11 @@ pub struct EncoderConfig {
     /// little to any image take levels that code smaller; 0 = nearest levels. Larger = smaller
     /// files, lower PSNR.
     pub shape_tolerance: f64,
+    /// Lossy (`CSOG`) still scenes: the least important static Gaussians (by blending weight
+    /// over [`importance::importance_views`]) that together hold at most `tier_weights[j]` of
+    /// the total weight are stored in a part `j + 1` bits coarser in every group (layout 1,
+    /// §6.5.2, [`importance::tiers`]); empty = one part. Not combined with `shape_tolerance`.
+    pub tier_weights: Vec<f64>,
 }
 
 impl Default for EncoderConfig {
@@ -189,6 +194,7 @@ impl Default for EncoderConfig {
             reallocate_bits: 0,
             drop_invisible: true,
             shape_tolerance: 0.0,
+            tier_weights: Vec::new(),
         }
     }
 }
@@ -401,6 +407,18 @@ impl<W: Write> StreamEncoder<W> {
                 }
                 if first {
                     self.static_order = Some(order);
+                }
+                if first && still && !self.cfg.tier_weights.is_empty() {
+                    let (parts, order) =
+                        importance::tiers(statics, &self.cfg.tier_weights, sort, bits);
+                    self.static_order = Some(order);
+                    let payload = sorted_grid::encode_parts(
+                        &parts,
+                        &sorted.dynamics,
+                        &bits,
+                        self.cfg.zstd_level,
+                    )?;
+                    return Ok((ChunkType::CSOG, payload));
                 }
                 let weights = (first && still && self.cfg.shape_tolerance > 0.0)
                     .then(|| importance::weights(&sorted.statics, self.cfg.shape_tolerance));

@@ -99,6 +99,21 @@ impl QuantBits {
         })
     }
 
+    /// Every group `by` bits coarser, at least 1 bit.
+    pub fn coarser(&self, by: u8) -> QuantBits {
+        let c = |b: u8| b.saturating_sub(by).max(1);
+        QuantBits {
+            position: c(self.position),
+            log_scale: c(self.log_scale),
+            rotation: c(self.rotation),
+            opacity: c(self.opacity),
+            sh_dc: c(self.sh_dc),
+            sh_rest: c(self.sh_rest),
+            sh_high: c(self.sh_high),
+            lang: c(self.lang),
+        }
+    }
+
     fn all(&self) -> [u8; 8] {
         [
             self.position,
@@ -512,6 +527,48 @@ pub fn encode_shaped(
     Ok(out)
 }
 
+/// Largest number of parts a set may be stored in (layout 1).
+pub const MAX_PARTS: usize = 16;
+
+/// Encode a canonical GOP in layout 1 (§6.5.2): the static set as the given parts, each a
+/// sorted grid with its own bits, stored in order (the decoded set is their concatenation);
+/// the dynamic set as one part with `dynamic_bits`.
+pub fn encode_parts(
+    static_parts: &[(Gaussians, QuantBits)],
+    dynamics: &Gaussians,
+    dynamic_bits: &QuantBits,
+    zstd_level: i32,
+) -> Result<Vec<u8>> {
+    let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
+    if !(1..=MAX_PARTS).contains(&static_parts.len()) {
+        return Err(bad(format!(
+            "{} static parts (1..={MAX_PARTS})",
+            static_parts.len()
+        )));
+    }
+    let all = static_parts
+        .iter()
+        .map(|(g, b)| (g, b))
+        .chain([(dynamics, dynamic_bits)]);
+    for (g, b) in all.clone() {
+        if let Some(x) = b.all().into_iter().find(|x| !(1..=16).contains(x)) {
+            return Err(bad(format!("quantisation bits must be 1..=16, got {x}")));
+        }
+        g.check_shapes()?;
+        g.check_finite()?;
+    }
+    let mut out = vec![1u8]; // layout version
+    out.put_u8(static_parts.len() as u8);
+    for (g, b) in static_parts {
+        out.put_u32(g.len() as u32);
+        encode_set(&mut out, g, b, zstd_level, None);
+    }
+    out.put_u8(1);
+    out.put_u32(dynamics.len() as u32);
+    encode_set(&mut out, dynamics, dynamic_bits, zstd_level, None);
+    Ok(out)
+}
+
 fn bad_at(reason: String, at: u64) -> Error {
     Error::new(
         ErrorKind::Payload {
@@ -664,6 +721,43 @@ fn decode_set(
     Ok(g)
 }
 
+/// A set stored as parts (layout 1): a part count, then per part its Gaussian count and its
+/// set record; the counts must add up to `n`.
+fn decode_parts(
+    r: &mut ByteReader,
+    n: usize,
+    sh_degree: u8,
+    lang_width: usize,
+    limits: &Limits,
+) -> Result<Gaussians> {
+    let at = r.offset();
+    let parts = r.u8("CSOG part count")? as usize;
+    if !(1..=MAX_PARTS).contains(&parts) {
+        return Err(bad_at(format!("{parts} parts (1..={MAX_PARTS})"), at));
+    }
+    let mut g = Gaussians::new(sh_degree, lang_width);
+    let mut left = n;
+    for p in 0..parts {
+        let at = r.offset();
+        let np = r.u32("CSOG part Gaussian count")? as usize;
+        if np > left {
+            return Err(bad_at(
+                format!("part {p} holds {np} Gaussians, only {left} of the set's {n} are left"),
+                at,
+            ));
+        }
+        left -= np;
+        g.extend(&decode_set(r, np, sh_degree, lang_width, limits)?);
+    }
+    if left != 0 {
+        return Err(bad_at(
+            format!("the parts hold {} of the set's {n} Gaussians", n - left),
+            at,
+        ));
+    }
+    Ok(g)
+}
+
 /// Back to pre-sigmoid opacity; alpha is kept half a step away from 0 and 1 so the logit is
 /// finite (§6.5.2).
 fn logit(alpha: Vec<f32>, bits: u8) -> Vec<f32> {
@@ -682,15 +776,24 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let mut r = ByteReader::new(p, offset);
     let at = r.offset();
     let version = r.u8("CSOG layout version")?;
-    if version != 0 {
-        return Err(bad_at(
-            format!("layout version {version} (this reader knows 0)"),
-            at,
-        ));
-    }
     let (sh, lw) = (scene.sh_degree, scene.lang_width());
-    let statics = decode_set(&mut r, scene.n_static as usize, sh, lw, limits)?;
-    let dynamics = decode_set(&mut r, scene.n_dynamic as usize, sh, lw, limits)?;
+    let (ns, nd) = (scene.n_static as usize, scene.n_dynamic as usize);
+    let (statics, dynamics) = match version {
+        0 => (
+            decode_set(&mut r, ns, sh, lw, limits)?,
+            decode_set(&mut r, nd, sh, lw, limits)?,
+        ),
+        1 => (
+            decode_parts(&mut r, ns, sh, lw, limits)?,
+            decode_parts(&mut r, nd, sh, lw, limits)?,
+        ),
+        _ => {
+            return Err(bad_at(
+                format!("layout version {version} (this reader knows 0 and 1)"),
+                at,
+            ))
+        }
+    };
     if r.remaining() != 0 {
         return Err(bad_at(
             format!("{} bytes after the last channel", r.remaining()),

@@ -89,6 +89,12 @@ pub fn all() -> Vec<Vector> {
         about: "the lod3 scene as sorted quantised grids (CSOG, preset medium, default sort)",
     });
     v.push(Vector {
+        name: "lod3-csog-tiered",
+        bytes: csog_tiered(&lod3),
+        error: None,
+        about: "the lod3 scene as CSOG layout 1 (since 1.8): preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser and those holding 2 % two bits coarser, three parts",
+    });
+    v.push(Vector {
         name: DYNAMIC_VECTOR,
         bytes: dynamic_vector(&lod3),
         error: None,
@@ -446,6 +452,19 @@ pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
         out.extend(&g.lang);
     }
     out
+}
+
+fn csog_tiered(g: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
+    let cfg = EncoderConfig {
+        canonical: CanonicalCodec::Sorted {
+            bits: dlgs::payload::sorted_grid::QuantBits::MEDIUM,
+            sort: SortSpec::DEFAULT,
+        },
+        tier_weights: vec![0.1, 0.02],
+        ..Default::default()
+    };
+    dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()
 }
 
 fn csog_still(g: &dlgs::Gaussians) -> Vec<u8> {
