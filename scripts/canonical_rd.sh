@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Canonical compression side by side on every real scene (issue 5, BENCHMARKS.md): raw PLY,
 # SPZ v4 and PlayCanvas SOG v2 (from scripts/peers.sh), and dlgs CSOG at high/medium/low, with
-# and without bit reallocation and level shaping.
+# and without bit reallocation, level shaping and importance tiers.
 # Rendered PSNR/SSIM against the uncompressed scene from 8 orbit cameras (dlgs compare).
 # Usage: bash scripts/canonical_rd.sh [PEERS_DIR]  (run scripts/peers.sh PEERS_DIR first)
 set -euo pipefail
@@ -37,11 +37,15 @@ for s in "${SCENES[@]}"; do
   # Presets as they are; +realloc: up to 4 bits moved between attribute groups by rendering
   # (--reallocate-bits: its own 5 views, not these 8); +shape: levels chosen by estimated bits
   # plus importance-weighted error (--shape 0.1: importance over 36 views of its own).
-  for setting in high medium low high+realloc medium+realloc high+shape medium+shape low+shape \
-      high+realloc+shape medium+realloc+shape low+realloc+shape; do
+  # +tiers: the least important Gaussians holding 4 % of the blending weight one bit coarser
+  # (--tiers 0.04: importance over the same 36 views). SETTINGS="a b .." runs only those.
+  for setting in ${SETTINGS:-high medium low high+realloc medium+realloc high+shape medium+shape \
+      low+shape high+realloc+shape medium+realloc+shape low+realloc+shape high+tiers medium+tiers \
+      low+tiers high+realloc+tiers medium+realloc+tiers low+realloc+tiers}; do
     q=${setting%%+*}; extra=()
     [[ "$setting" == *realloc* ]] && extra+=(--reallocate-bits 4)
     [[ "$setting" == *shape* ]] && extra+=(--shape 0.1)
+    [[ "$setting" == *tiers* ]] && extra+=(--tiers 0.04)
     f="$OUT/$name-$setting.dlgs"
     start=$(date +%s.%N); $DLGS encode "$src" -o "$f" --quality "$q" "${extra[@]}" > /dev/null; end=$(date +%s.%N)
     dec=$(target/release/examples/decode_timing "$f" 5 | grep -o 'median [0-9.]*' | cut -d' ' -f2)
