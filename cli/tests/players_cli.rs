@@ -215,3 +215,44 @@ fn rd_writes_csv_and_plots() {
         eprintln!("no plot font on this machine (install fonts-dejavu-core): plots not checked");
     }
 }
+
+#[test]
+fn encode_with_tiers_and_seek_with_a_gop_cache() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data(SCENE);
+    let scene = scene.to_str().unwrap();
+    let out = tmp.path().join("tiered.dlgs");
+    let out = out.to_str().unwrap();
+    dlgs(&[
+        "encode",
+        scene,
+        "-o",
+        out,
+        "--quality",
+        "medium",
+        "--tiers",
+        "0.1,0.02",
+    ]);
+    let cmp = dlgs(&["compare", scene, out, "--json", "--orbit", "2"]);
+    let psnr: f64 = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+        .as_f64()
+        .unwrap();
+    assert!(psnr > 40.0, "{psnr} dB");
+    for (args, says) in [
+        (vec!["--tiers", "0.01,0.1"], "must not increase"),
+        (vec!["--tiers", "1.5"], "[0, 1)"),
+        (
+            vec!["--tiers", "0.1", "--shape", "0.1"],
+            "cannot be combined",
+        ),
+        (vec!["--quality", "lossless", "--tiers", "0.1"], "lossy"),
+    ] {
+        let mut a = vec!["encode", scene, "-o", out];
+        a.extend(&args);
+        let err = dlgs_fails(&a);
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    let m = model(tmp.path(), 3);
+    let seek = dlgs(&["seek", &m, "--count", "4", "--gop-cache", "3"]);
+    assert!(seek.contains("GOP cache 3"), "{seek}");
+}

@@ -118,6 +118,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn least_weight_takes_the_lightest_up_to_the_fraction() {
+        let w = [4.0, 0.0, 1.0, 1.0, 2.0, 0.0];
+        // Total 8: 10 % is 0.8 -> only the two never-seen ones; 25 % adds both 1.0s (tie
+        // broken by index, both fit); 30 % cannot take the 2.0.
+        assert_eq!(least_weight(&w, 0.1), vec![1, 5]);
+        assert_eq!(least_weight(&w, 0.25), vec![1, 2, 3, 5]);
+        assert_eq!(least_weight(&w, 0.3), vec![1, 2, 3, 5]);
+        assert_eq!(least_weight(&w, 0.0), vec![1, 5]);
+        // Nothing seen at all: every Gaussian holds none of the (zero) total.
+        assert_eq!(least_weight(&[0.0; 3], 0.04), vec![0, 1, 2]);
+        assert!(least_weight(&[], 0.5).is_empty());
+    }
+
+    #[test]
     fn weights_follow_the_relative_blending_weight() {
         // mean 1.0 over [0, 0.01, 0.25, 3.74].
         let w = shaping_weights(&[0.0, 0.01, 0.25, 3.74], 0.5);

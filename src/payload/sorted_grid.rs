@@ -550,7 +550,7 @@ pub fn encode_parts(
         .iter()
         .map(|(g, b)| (g, b))
         .chain([(dynamics, dynamic_bits)]);
-    for (g, b) in all.clone() {
+    for (g, b) in all {
         if let Some(x) = b.all().into_iter().find(|x| !(1..=16).contains(x)) {
             return Err(bad(format!("quantisation bits must be 1..=16, got {x}")));
         }
