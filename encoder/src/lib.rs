@@ -172,7 +172,8 @@ pub struct EncoderConfig {
     /// Lossy (`CSOG`) still scenes: the least important static Gaussians (by blending weight
     /// over [`importance::importance_views`]) that together hold at most `tier_weights[j]` of
     /// the total weight are stored in a part `j + 1` bits coarser in every group (layout 1,
-    /// §6.5.2, [`importance::tiers`]); empty = one part. Not combined with `shape_tolerance`.
+    /// §6.5.2, [`importance::tiers`]); empty = one part. When set, `shape_tolerance` is not
+    /// applied (the CLI refuses both).
     pub tier_weights: Vec<f64>,
 }
 
