@@ -406,10 +406,8 @@ impl<W: Write> StreamEncoder<W> {
                     bits = a.bits;
                     self.allocation = Some(a);
                 }
-                if first {
-                    self.static_order = Some(order);
-                }
                 if first && still && !self.cfg.tier_weights.is_empty() {
+                    // Each part is sorted on its own: that order is the one stored.
                     let (parts, order) =
                         importance::tiers(statics, &self.cfg.tier_weights, sort, bits);
                     self.static_order = Some(order);
@@ -420,6 +418,9 @@ impl<W: Write> StreamEncoder<W> {
                         self.cfg.zstd_level,
                     )?;
                     return Ok((ChunkType::CSOG, payload));
+                }
+                if first {
+                    self.static_order = Some(order);
                 }
                 let weights = (first && still && self.cfg.shape_tolerance > 0.0)
                     .then(|| importance::weights(&sorted.statics, self.cfg.shape_tolerance));
