@@ -144,6 +144,7 @@ fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i
         n,
         grid_width(n),
         bits,
+        None,
     )
     .map_err(|e| match e.kind {
         ErrorKind::Payload { reason, .. } => bad(reason, e.offset),

@@ -10,6 +10,7 @@ use constriction::stream::model::ContiguousCategoricalEntropyModel;
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
 use constriction::stream::{Decode, Encode};
 
+use super::adaptive_coder;
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::{ErrorKind, Result};
 
@@ -33,6 +34,8 @@ pub enum GridCodec {
     /// range-coded with its stored histogram: colour and scale channels of one Gaussian move
     /// together, so the difference is narrower than either.
     HistogramDelta = 4,
+    /// Adaptive binary context coding ([`super::adaptive_coder`]), since 1.9.
+    Adaptive = 5,
 }
 
 impl GridCodec {
@@ -43,6 +46,7 @@ impl GridCodec {
             2 => Some(GridCodec::Predictive),
             3 => Some(GridCodec::Histogram),
             4 => Some(GridCodec::HistogramDelta),
+            5 => Some(GridCodec::Adaptive),
             _ => None,
         }
     }
@@ -431,11 +435,12 @@ pub fn encode_classic(q: &[u16], width: usize, bits: u8, zstd_level: i32) -> (Gr
     }
 }
 
-/// Encode with whichever codec is smaller for this channel. `prev` is the previous channel's
-/// cells when it has the same `bits` (codec 4 may then code the difference).
-pub fn encode_best(
+/// Encode with whichever of codecs 0-4 is smaller for this channel (the codecs with stored
+/// tables: fast to try, which level shaping does for every variant). `prev` is the previous
+/// channel's cells and bits; codec 4 codes the difference from it when the bits match.
+pub fn encode_best_tabled(
     q: &[u16],
-    prev: Option<&[u16]>,
+    prev: Option<(&[u16], u8)>,
     width: usize,
     bits: u8,
     zstd_level: i32,
@@ -452,11 +457,35 @@ pub fn encode_best(
         }
     };
     consider(GridCodec::Histogram, encode_histogram(q, zstd_level));
-    if let Some(prev) = prev {
+    if let Some((prev, pb)) = prev.filter(|p| p.1 == bits) {
+        debug_assert_eq!(pb, bits);
         consider(
             GridCodec::HistogramDelta,
             encode_histogram(&delta(q, prev, bits), zstd_level),
         );
+    }
+    best
+}
+
+/// Encode with whichever codec is smallest for this channel: codecs 0-4
+/// ([`encode_best_tabled`]) and every usable mode of codec 5.
+pub fn encode_best(
+    q: &[u16],
+    prev: Option<(&[u16], u8)>,
+    width: usize,
+    bits: u8,
+    zstd_level: i32,
+) -> (GridCodec, Vec<u8>) {
+    let mut best = encode_best_tabled(q, prev, width, bits, zstd_level);
+    if best.0 == GridCodec::Constant {
+        return best;
+    }
+    for mode in adaptive_coder::candidate_modes(bits, prev) {
+        if let Some(d) = adaptive_coder::encode(q, prev, width, bits, mode) {
+            if d.len() < best.1.len() {
+                best = (GridCodec::Adaptive, d);
+            }
+        }
     }
     best
 }
@@ -472,19 +501,22 @@ pub fn encode_zstd(q: &[u16], bits: u8, level: i32) -> Vec<u8> {
 
 /// Decode one channel of `n` cells; every value is checked to be below `2^bits`. For
 /// [`GridCodec::HistogramDelta`] the result is the coded difference: add the previous channel
-/// with [`undo_delta`].
+/// with [`undo_delta`]. [`GridCodec::Adaptive`] reads `prev`, the previous channel's final
+/// cells and bits (a typed error if its mode needs them and they are absent).
 pub fn decode(
     codec: GridCodec,
     r: ByteReader,
     n: usize,
     width: usize,
     bits: u8,
+    prev: Option<(&[u16], u8)>,
 ) -> Result<Vec<u16>> {
     let at = r.offset();
     let q = match codec {
         GridCodec::Constant => vec![0u16; n],
         GridCodec::Predictive => decode_predictive(r, n, width, bits)?,
         GridCodec::Histogram | GridCodec::HistogramDelta => decode_histogram(r, n, bits)?,
+        GridCodec::Adaptive => adaptive_coder::decode(r, n, width, bits, prev)?,
         GridCodec::Zstd => {
             let mut r = r;
             let per = if bits <= 8 { 1 } else { 2 };
@@ -528,7 +560,7 @@ mod tests {
         assert_eq!(d, q);
         let (codec, b) = encode_classic(q, width, bits, 3);
         assert_eq!(
-            decode(codec, ByteReader::new(&b, 0), q.len(), width, bits).unwrap(),
+            decode(codec, ByteReader::new(&b, 0), q.len(), width, bits, None).unwrap(),
             q
         );
         e.len()
@@ -615,10 +647,10 @@ mod tests {
         let coded = e.len() as f64 * 8.0;
         assert!(coded < h0 * 1.02 + 8.0 * 400.0, "{coded} bits vs H0 {h0}");
         // Codec 4 through encode_best: the difference is far narrower than the values.
-        let (codec, b) = encode_best(&follow, Some(&q), 100, 9, 3);
+        let (codec, b) = encode_best_tabled(&follow, Some((&q, 9)), 100, 9, 3);
         assert_eq!(codec, GridCodec::HistogramDelta);
         assert!(b.len() * 8 < n * 3, "{} bytes", b.len());
-        let mut d = decode(codec, ByteReader::new(&b, 0), n, 100, 9).unwrap();
+        let mut d = decode(codec, ByteReader::new(&b, 0), n, 100, 9, None).unwrap();
         undo_delta(&mut d, &q, 9);
         assert_eq!(d, follow);
         // Wrap-around of the modular difference, and a two-symbol alphabet.

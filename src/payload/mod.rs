@@ -1,5 +1,6 @@
 //! Payload codecs of the chunk types the container carries (format-spec §6 onwards).
 
+pub mod adaptive_coder;
 pub mod binary_bits;
 pub mod delta_residual;
 pub mod grid_coder;

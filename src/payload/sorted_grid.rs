@@ -369,12 +369,10 @@ fn code_set(
         .into_par_iter()
         .map(|j| {
             let (b, min, max, q) = &chans[j];
-            // Codec 4 may code the difference from the previous channel when its bits match.
+            // Codecs 4 and 5 may code against the previous channel.
             let prev = j
                 .checked_sub(1)
-                .map(|p| &chans[p])
-                .filter(|p| p.0 == *b)
-                .map(|p| p.3.as_slice());
+                .map(|p| (chans[p].3.as_slice(), chans[p].0));
             let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
             Channel {
                 bits: *b,
@@ -406,8 +404,7 @@ fn shape_channels(
         }
         let prev = j
             .checked_sub(1)
-            .filter(|&p| chans[p].0 == b)
-            .map(|p| chans[p].3.as_slice());
+            .map(|p| (chans[p].3.as_slice(), chans[p].0));
         let scale = levels(b) / (max - min);
         let exact: Vec<f32> = values(g, kinds[j])
             .iter()
@@ -424,13 +421,15 @@ fn shape_channels(
             grid_shaping::for_prediction(&cells, width),
             grid_shaping::for_histogram(&cells, None),
         ];
-        if let Some(p) = prev {
+        if let Some((p, _)) = prev.filter(|p| p.1 == b) {
             variants.push(grid_shaping::for_histogram(&cells, Some(p)));
         }
+        // Judged by the tabled codecs the variants were shaped for (codec 5's modes would
+        // multiply the passes); the final coding still tries codec 5.
         let best = variants
             .into_par_iter()
             .min_by_key(|q| {
-                grid_coder::encode_best(q, prev, width, b, zstd_level)
+                grid_coder::encode_best_tabled(q, prev, width, b, zstd_level)
                     .1
                     .len()
             })
@@ -647,22 +646,40 @@ fn decode_set(
         let data = r.take(len, "CSOG channel data")?;
         stored.push((k, bits, codec, min, max, data, at));
     }
-    let mut cells: Vec<Vec<u16>> = stored
+    // Codec 4 and codec 5 (but mode 0) channels need the previous channel's final cells:
+    // split the records into chains that start at an independent channel, decode the chains in
+    // parallel and each chain in order (same cells whatever the thread count).
+    let needs_previous = |s: &Stored| match s.2 {
+        GridCodec::HistogramDelta => true,
+        GridCodec::Adaptive => s.5.first().is_some_and(|&mode| mode != 0),
+        _ => false,
+    };
+    let mut chains: Vec<std::ops::Range<usize>> = Vec::new();
+    for j in 0..stored.len() {
+        match chains.last_mut() {
+            Some(c) if needs_previous(&stored[j]) => c.end = j + 1,
+            _ => chains.push(j..j + 1),
+        }
+    }
+    let decoded_chains: Vec<Vec<Vec<u16>>> = chains
         .par_iter()
-        .map(|&(_, bits, codec, _, _, data, at)| {
-            grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits)
+        .map(|range| {
+            let mut out: Vec<Vec<u16>> = Vec::with_capacity(range.len());
+            for j in range.clone() {
+                let (_, bits, codec, _, _, data, at) = stored[j];
+                let prev = out.last().map(|p| (p.as_slice(), stored[j - 1].1));
+                let mut q =
+                    grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits, prev)?;
+                if codec == GridCodec::HistogramDelta {
+                    let (p, _) = prev.expect("codec 4 continues a chain (checked above)");
+                    grid_coder::undo_delta(&mut q, p, bits);
+                }
+                out.push(q);
+            }
+            Ok(out)
         })
         .collect::<Result<_>>()?;
-    // Codec 4 channels hold the difference from the previous channel (same bits, checked
-    // above): resolve in order.
-    for j in 1..stored.len() {
-        let (_, bits, codec, ..) = stored[j];
-        if codec != GridCodec::HistogramDelta {
-            continue;
-        }
-        let (done, rest) = cells.split_at_mut(j);
-        grid_coder::undo_delta(&mut rest[0], &done[j - 1], bits);
-    }
+    let cells: Vec<Vec<u16>> = decoded_chains.into_iter().flatten().collect();
     let decoded: Vec<(u8, Vec<f32>)> = stored
         .par_iter()
         .zip(cells)

@@ -1,0 +1,477 @@
+//! Grid codec 5 (format-spec §6.5.3, since 1.9): every cell binarised and range-coded bit by
+//! bit with adaptive binary models, so no probability table is stored and the statistics may
+//! depend on many contexts. Four modes:
+//!
+//! * 0: the predictive codec's residual (median edge detector, modulo `2^bits`, zigzag), as a
+//!   magnitude class (unary) and mantissa, in one of 7 spatial activity contexts;
+//! * 1: as 0, with the class of the previous channel's residual at the same cell as a second
+//!   context (the attributes of one Gaussian are surprised together);
+//! * 2: as 1, coding the residual minus the previous channel's residual (same `bits`);
+//! * 3: the value itself, most significant bit first down a binary tree, in the context of the
+//!   previous channel's value at the same cell (its top `k` bits): colours cluster, so one
+//!   channel narrows the next more than any neighbour does.
+//!
+//! One function ([`code_cells`]) walks the cells for both directions, so the encoder and the
+//! decoder cannot disagree on a context.
+
+use std::borrow::Borrow;
+use std::num::NonZeroU32;
+
+use constriction::stream::model::{DecoderModel, EncoderModel, EntropyModel};
+use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
+use constriction::stream::{Decode, Encode};
+
+use super::grid_coder::{class_of, neighbours, predict, zigzag};
+use crate::bytes::{ByteReader, PutLe};
+use crate::error::{ErrorKind, Result};
+
+/// Probability precision of the binary models.
+const PRECISION: usize = 16;
+const ONE: u32 = 1 << PRECISION;
+/// Probabilities stay in `[P_MIN, ONE - P_MIN]`.
+const P_MIN: u32 = 32;
+/// Slowest adaptation: a model moves `1/2^MAX_SHIFT` of the way to each new bit.
+const MAX_SHIFT: u32 = 6;
+/// Activity contexts (modes 0-2) and previous-residual classes (modes 1-2).
+const ACTIVITY_CONTEXTS: usize = 7;
+const PREV_CLASSES: usize = 8;
+/// Mode 3 only for `bits <= TREE_MAX_BITS`, with `1..=TREE_MAX_CONTEXT_BITS` context bits:
+/// at most `2^8 * 2^10` tree nodes.
+pub const TREE_MAX_BITS: u8 = 10;
+pub const TREE_MAX_CONTEXT_BITS: u8 = 8;
+
+/// An adaptive binary model: `p` = probability of a 0 bit in units of `2^-16`, and how many
+/// bits it has seen (its adaptation is fast at first, then settles at `1/64`).
+#[derive(Clone, Copy)]
+struct Adaptive {
+    p: u16,
+    seen: u8,
+}
+
+impl Adaptive {
+    const NEW: Adaptive = Adaptive {
+        p: (ONE / 2) as u16,
+        seen: 0,
+    };
+
+    fn update(&mut self, bit: bool) {
+        let shift = (self.seen as u32 + 1).min(MAX_SHIFT);
+        let p = self.p as u32;
+        let p = if bit {
+            p - (p >> shift)
+        } else {
+            p + ((ONE - p) >> shift)
+        };
+        self.p = p.clamp(P_MIN, ONE - P_MIN) as u16;
+        self.seen = self.seen.saturating_add(1);
+    }
+}
+
+/// A two-symbol model for constriction's range coder: `false` takes `[0, p0)`.
+struct Binary {
+    p0: u32,
+}
+
+impl EntropyModel<PRECISION> for Binary {
+    type Symbol = bool;
+    type Probability = u32;
+}
+
+impl EncoderModel<PRECISION> for Binary {
+    fn left_cumulative_and_probability(
+        &self,
+        symbol: impl Borrow<bool>,
+    ) -> Option<(u32, NonZeroU32)> {
+        if *symbol.borrow() {
+            Some((self.p0, NonZeroU32::new(ONE - self.p0)?))
+        } else {
+            Some((0, NonZeroU32::new(self.p0)?))
+        }
+    }
+}
+
+impl DecoderModel<PRECISION> for Binary {
+    fn quantile_function(&self, quantile: u32) -> (bool, u32, NonZeroU32) {
+        // p0 is in [P_MIN, ONE - P_MIN], so both widths are non-zero.
+        let nz = |v| NonZeroU32::new(v).expect("model probabilities are clamped above zero");
+        if quantile < self.p0 {
+            (false, 0, nz(self.p0))
+        } else {
+            (true, self.p0, nz(ONE - self.p0))
+        }
+    }
+}
+
+/// One direction of the coder: the encoder codes `bit` and returns it; the decoder ignores it
+/// and returns the decoded bit.
+trait BitCoder {
+    fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool>;
+    /// A bit with probability 1/2 and no model.
+    fn raw(&mut self, bit: bool) -> Result<bool> {
+        let mut half = Adaptive::NEW;
+        let b = self.code(&mut half, bit)?;
+        Ok(b)
+    }
+}
+
+struct Encoder(DefaultRangeEncoder);
+
+impl BitCoder for Encoder {
+    fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool> {
+        self.0
+            .encode_symbol(bit, Binary { p0: m.p as u32 })
+            .expect("a bool is inside a binary model");
+        m.update(bit);
+        Ok(bit)
+    }
+}
+
+struct Decoder<'a> {
+    dec: DefaultRangeDecoder,
+    r: &'a ByteReader<'a>,
+}
+
+impl BitCoder for Decoder<'_> {
+    fn code(&mut self, m: &mut Adaptive, _: bool) -> Result<bool> {
+        let bit = self
+            .dec
+            .decode_symbol(Binary { p0: m.p as u32 })
+            .map_err(|_| bad(self.r, "range coder stream ended early".into()))?;
+        m.update(bit);
+        Ok(bit)
+    }
+}
+
+fn bad(r: &ByteReader, reason: String) -> crate::Error {
+    r.err(ErrorKind::Payload {
+        chunk: crate::container::ChunkType::CSOG,
+        reason,
+    })
+}
+
+/// Coding mode of a codec-5 channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    Residual,
+    ResidualGivenPrevious,
+    ResidualMinusPrevious,
+    /// Value tree with the previous channel's top `k` bits as context.
+    TreeGivenPrevious(u8),
+}
+
+impl Mode {
+    fn byte(self) -> (u8, u8) {
+        match self {
+            Mode::Residual => (0, 0),
+            Mode::ResidualGivenPrevious => (1, 0),
+            Mode::ResidualMinusPrevious => (2, 0),
+            Mode::TreeGivenPrevious(k) => (3, k),
+        }
+    }
+
+    /// Why this mode cannot code a `bits`-bit channel after `prev`, if it cannot.
+    fn unusable(self, bits: u8, prev: Option<(&[u16], u8)>) -> Option<String> {
+        match (self, prev) {
+            (Mode::Residual, _) => None,
+            (_, None) => Some("needs a previous channel in the set".into()),
+            (Mode::ResidualGivenPrevious, _) => None,
+            (Mode::ResidualMinusPrevious, Some((_, pb))) => {
+                (pb != bits).then(|| format!("needs a previous channel of {bits} bits, not {pb}"))
+            }
+            (Mode::TreeGivenPrevious(k), _) => {
+                if bits > TREE_MAX_BITS {
+                    Some(format!(
+                        "value tree for {bits} bits (at most {TREE_MAX_BITS})"
+                    ))
+                } else if !(1..=TREE_MAX_CONTEXT_BITS).contains(&k) {
+                    Some(format!("{k} context bits (1..={TREE_MAX_CONTEXT_BITS})"))
+                } else {
+                    None
+                }
+            }
+        }
+    }
+}
+
+/// The signed residual of cell `i` as the predictive codec forms it, zigzag-mapped.
+#[inline]
+fn residual_at(q: &[u16], i: usize, width: usize, bits: u8) -> u32 {
+    let (a, b, c, ha, hb) = neighbours(q, i, width);
+    zigzag(q[i], predict(a, b, c, ha, hb), bits)
+}
+
+#[inline]
+fn signed(z: u32) -> i32 {
+    ((z >> 1) as i32) ^ -((z & 1) as i32)
+}
+
+/// Activity context: bit length of `|a-c| + |b-c| + |a-b|` (0 without both neighbours),
+/// capped at 12, halved.
+#[inline]
+fn activity(a: u16, b: u16, c: u16, ha: bool, hb: bool) -> usize {
+    if !(ha && hb) {
+        return 0;
+    }
+    let act = (a as i32 - c as i32).unsigned_abs()
+        + (b as i32 - c as i32).unsigned_abs()
+        + (a as i32 - b as i32).unsigned_abs();
+    (class_of(act).min(12) / 2) as usize
+}
+
+/// Walk the cells in order, coding (encoder: `q` holds the values) or filling (decoder: `q`
+/// starts at zeros) each one.
+fn code_cells<C: BitCoder>(
+    coder: &mut C,
+    q: &mut [u16],
+    width: usize,
+    bits: u8,
+    mode: Mode,
+    prev: Option<(&[u16], u8)>,
+) -> Result<()> {
+    let b = bits as usize;
+    match mode {
+        Mode::TreeGivenPrevious(k) => {
+            let (pq, pb) = prev.expect("checked by the caller");
+            let shift = pb.saturating_sub(k);
+            let contexts = 1usize << k.min(pb);
+            let nodes = 1usize << b;
+            let mut models = vec![Adaptive::NEW; contexts * nodes];
+            for i in 0..q.len() {
+                // Previous cells fit their bits (checked when decoded); `min` keeps a bad
+                // caller from indexing past the models.
+                let ctx = ((pq[i] >> shift) as usize).min(contexts - 1);
+                let base = ctx * nodes;
+                let mut node = 1usize;
+                for level in (0..b).rev() {
+                    let bit = q[i] >> level & 1 == 1;
+                    let got = coder.code(&mut models[base + node], bit)?;
+                    node = node * 2 + got as usize;
+                }
+                q[i] = (node - nodes) as u16;
+            }
+        }
+        _ => {
+            let with_prev = mode != Mode::Residual;
+            let contexts = ACTIVITY_CONTEXTS * PREV_CLASSES;
+            let mut unary = vec![Adaptive::NEW; contexts * b];
+            let mut top = vec![Adaptive::NEW; contexts * (b + 1)];
+            let m = 1i32 << bits;
+            for i in 0..q.len() {
+                let (a, bb, c, ha, hb) = neighbours(q, i, width);
+                let pred = predict(a, bb, c, ha, hb);
+                let (pclass, pres) = match (with_prev, prev) {
+                    (true, Some((pq, pb))) => {
+                        let z = residual_at(pq, i, width, pb);
+                        ((class_of(z) as usize).min(PREV_CLASSES - 1), signed(z))
+                    }
+                    _ => (0, 0),
+                };
+                let ctx = activity(a, bb, c, ha, hb) * PREV_CLASSES + pclass;
+                // The symbol: the residual (mode 2: minus the previous one), mod 2^bits, zigzag.
+                let z = if mode == Mode::ResidualMinusPrevious {
+                    let r = signed(zigzag(q[i], pred, bits));
+                    zigzag(((r - pres).rem_euclid(m)) as u16, 0, bits)
+                } else {
+                    zigzag(q[i], pred, bits)
+                };
+                // Class: unary, at most `bits` ones (class `bits` has no closing zero).
+                let class = class_of(z) as usize;
+                let mut k = 0;
+                while k < b {
+                    if !coder.code(&mut unary[ctx * b + k], class > k)? {
+                        break;
+                    }
+                    k += 1;
+                }
+                // Mantissa: the bit under the leading one modelled, the rest raw.
+                let z = if k >= 2 {
+                    let mut v = 1u32;
+                    let hi = coder.code(&mut top[ctx * (b + 1) + k], z >> (k - 2) & 1 == 1)?;
+                    v = v << 1 | hi as u32;
+                    for level in (0..k - 2).rev() {
+                        v = v << 1 | coder.raw(z >> level & 1 == 1)? as u32;
+                    }
+                    v
+                } else {
+                    k as u32
+                };
+                let r = if mode == Mode::ResidualMinusPrevious {
+                    signed(z) + pres
+                } else {
+                    signed(z)
+                };
+                q[i] = (pred as i32 + r).rem_euclid(m) as u16;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Codec 5 data for `q` in `mode`; `None` when the mode cannot code this channel.
+pub fn encode(
+    q: &[u16],
+    prev: Option<(&[u16], u8)>,
+    width: usize,
+    bits: u8,
+    mode: Mode,
+) -> Option<Vec<u8>> {
+    if mode.unusable(bits, prev).is_some() {
+        return None;
+    }
+    let mut coder = Encoder(DefaultRangeEncoder::new());
+    let mut cells = q.to_vec();
+    code_cells(&mut coder, &mut cells, width, bits, mode, prev).expect("encoding cannot fail");
+    debug_assert_eq!(cells, q, "the walk reconstructs what it codes");
+    let words = coder.0.into_compressed().expect("in-memory backend");
+    let (m, k) = mode.byte();
+    let mut out = vec![m, k];
+    out.put_u32(words.len() as u32);
+    for w in &words {
+        out.put_u32(*w);
+    }
+    Some(out)
+}
+
+/// The modes the encoder tries.
+pub fn candidate_modes(bits: u8, prev: Option<(&[u16], u8)>) -> Vec<Mode> {
+    let mut modes = vec![
+        Mode::Residual,
+        Mode::ResidualGivenPrevious,
+        Mode::ResidualMinusPrevious,
+    ];
+    modes.extend([2, 4, 6, 8].map(Mode::TreeGivenPrevious));
+    modes
+        .into_iter()
+        .filter(|m| m.unusable(bits, prev).is_none())
+        .collect()
+}
+
+/// Decode `n` cells of codec 5; `prev` is the previous channel record's cells and bits.
+pub fn decode(
+    mut r: ByteReader,
+    n: usize,
+    width: usize,
+    bits: u8,
+    prev: Option<(&[u16], u8)>,
+) -> Result<Vec<u16>> {
+    let mode = match (r.u8("adaptive mode")?, r.u8("adaptive context bits")?) {
+        (0, 0) => Mode::Residual,
+        (1, 0) => Mode::ResidualGivenPrevious,
+        (2, 0) => Mode::ResidualMinusPrevious,
+        (3, k) => Mode::TreeGivenPrevious(k),
+        (m, k) => return Err(bad(&r, format!("adaptive mode {m} with {k} context bits"))),
+    };
+    if let Some(why) = mode.unusable(bits, prev) {
+        return Err(bad(&r, format!("adaptive mode {mode:?}: {why}")));
+    }
+    let nwords = r.u32("range coder word count")? as usize;
+    let raw = r.take(
+        nwords
+            .checked_mul(4)
+            .ok_or_else(|| bad(&r, "word count overflows".into()))?,
+        "range coder words",
+    )?;
+    if r.remaining() != 0 {
+        return Err(bad(
+            &r,
+            format!("{} bytes after the adaptive stream", r.remaining()),
+        ));
+    }
+    let words: Vec<u32> = raw
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect();
+    let dec = DefaultRangeDecoder::from_compressed(words)
+        .map_err(|_| bad(&r, "range coder stream".into()))?;
+    let mut q = vec![0u16; n];
+    let mut coder = Decoder { dec, r: &r };
+    code_cells(&mut coder, &mut q, width, bits, mode, prev)?;
+    Ok(q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(n: usize, seed: u32, bits: u8) -> Vec<u16> {
+        let mut s = seed;
+        (0..n)
+            .map(|i| {
+                s ^= s << 13;
+                s ^= s >> 17;
+                s ^= s << 5;
+                // A smooth ramp plus noise, wrapped to the bits.
+                (((i as u32 / 3) + (s % 9)) % (1u32 << bits)) as u16
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_mode_round_trips_partial_grids_and_extremes() {
+        for bits in [1u8, 2, 5, 8, 10, 14, 16] {
+            for n in [1usize, 2, 7, 50, 401] {
+                let width = (n as f64).sqrt().ceil() as usize;
+                let mut q = noise(n, 3, bits);
+                // Extremes: 0 and 2^bits - 1 next to each other.
+                if n > 3 {
+                    q[1] = 0;
+                    q[2] = ((1u32 << bits) - 1) as u16;
+                }
+                for pb in [bits, 3, 12] {
+                    let prev_q = noise(n, 7, pb);
+                    let pv = Some((prev_q.as_slice(), pb));
+                    for mode in candidate_modes(bits, pv) {
+                        let e = encode(&q, pv, width, bits, mode).unwrap();
+                        let d = decode(ByteReader::new(&e, 0), n, width, bits, pv).unwrap();
+                        assert_eq!(d, q, "bits {bits}, n {n}, mode {mode:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_channel_that_follows_the_previous_one_codes_smaller_with_it() {
+        let n = 4096;
+        let prev = noise(n, 11, 8);
+        // Each value a function of the previous channel's value: the tree learns the map.
+        let q: Vec<u16> = prev.iter().map(|&v| (v * 7 + 3) % 256).collect();
+        let alone = encode(&q, None, 64, 8, Mode::Residual).unwrap().len();
+        let tree = encode(&q, Some((&prev, 8)), 64, 8, Mode::TreeGivenPrevious(8))
+            .unwrap()
+            .len();
+        assert!(tree * 2 < alone, "tree {tree} B, alone {alone} B");
+    }
+
+    #[test]
+    fn malformed_headers_and_streams_are_typed_errors() {
+        let q = noise(100, 5, 9);
+        let e = encode(&q, None, 10, 9, Mode::Residual).unwrap();
+        // Unknown mode, modes without a previous channel, a tree too wide.
+        for (m, k) in [(4u8, 0u8), (1, 0), (2, 0), (3, 4), (0, 1)] {
+            let mut bad_e = e.clone();
+            bad_e[0] = m;
+            bad_e[1] = k;
+            assert!(decode(ByteReader::new(&bad_e, 0), 100, 10, 9, None).is_err());
+        }
+        let prev = noise(100, 1, 12);
+        let mut tree = e.clone();
+        tree[0] = 3;
+        tree[1] = 4;
+        assert!(decode(ByteReader::new(&tree, 0), 100, 10, 12, Some((&prev, 12))).is_err());
+        // Truncated words, trailing bytes.
+        assert!(decode(ByteReader::new(&e[..e.len() - 1], 0), 100, 10, 9, None).is_err());
+        let mut long = e.clone();
+        long.push(0);
+        assert!(decode(ByteReader::new(&long, 0), 100, 10, 9, None).is_err());
+        // Garbage words decode to some values or a typed error, never a panic, and every value
+        // fits the bits.
+        let mut junk = e.clone();
+        for (i, b) in junk.iter_mut().enumerate().skip(6) {
+            *b = (i * 37 % 251) as u8;
+        }
+        if let Ok(v) = decode(ByteReader::new(&junk, 0), 100, 10, 9, None) {
+            assert!(v.iter().all(|&x| x < 512));
+        }
+    }
+}
