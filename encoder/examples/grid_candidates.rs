@@ -67,6 +67,7 @@ fn main() {
             "file": file,
             "bits": b,
             "best_codec": codec as u8,
+            "codec5_mode": (codec == grid_coder::GridCodec::Adaptive).then(|| [best[0], best[1]]),
             "best": best.len(),
             "tabled": tabled.len(),
             "predictive": grid_coder::encode_predictive(q, w, *b).len(),

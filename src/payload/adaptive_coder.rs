@@ -157,6 +157,8 @@ pub enum Mode {
     ResidualMinusPrevious,
     /// Value tree with the previous channel's top `k` bits as context.
     TreeGivenPrevious(u8),
+    /// Value tree in one context (an adaptive order-0 model that needs no other channel).
+    Tree,
 }
 
 impl Mode {
@@ -166,23 +168,43 @@ impl Mode {
             Mode::ResidualGivenPrevious => (1, 0),
             Mode::ResidualMinusPrevious => (2, 0),
             Mode::TreeGivenPrevious(k) => (3, k),
+            Mode::Tree => (4, 0),
+        }
+    }
+
+    /// Whether decoding needs the previous channel's cells (a reader decodes the channels
+    /// that do not in parallel).
+    pub fn needs_previous(self) -> bool {
+        !matches!(self, Mode::Residual | Mode::Tree)
+    }
+
+    /// The mode named by a codec-5 channel's first two bytes.
+    pub fn from_bytes(mode: u8, k: u8) -> Option<Mode> {
+        match (mode, k) {
+            (0, 0) => Some(Mode::Residual),
+            (1, 0) => Some(Mode::ResidualGivenPrevious),
+            (2, 0) => Some(Mode::ResidualMinusPrevious),
+            (3, k) => Some(Mode::TreeGivenPrevious(k)),
+            (4, 0) => Some(Mode::Tree),
+            _ => None,
         }
     }
 
     /// Why this mode cannot code a `bits`-bit channel after `prev`, if it cannot.
     fn unusable(self, bits: u8, prev: Option<(&[u16], u8)>) -> Option<String> {
+        let too_wide = (bits > TREE_MAX_BITS)
+            .then(|| format!("value tree for {bits} bits (at most {TREE_MAX_BITS})"));
         match (self, prev) {
             (Mode::Residual, _) => None,
+            (Mode::Tree, _) => too_wide,
             (_, None) => Some("needs a previous channel in the set".into()),
             (Mode::ResidualGivenPrevious, _) => None,
             (Mode::ResidualMinusPrevious, Some((_, pb))) => {
                 (pb != bits).then(|| format!("needs a previous channel of {bits} bits, not {pb}"))
             }
             (Mode::TreeGivenPrevious(k), _) => {
-                if bits > TREE_MAX_BITS {
-                    Some(format!(
-                        "value tree for {bits} bits (at most {TREE_MAX_BITS})"
-                    ))
+                if too_wide.is_some() {
+                    too_wide
                 } else if !(1..=TREE_MAX_CONTEXT_BITS).contains(&k) {
                     Some(format!("{k} context bits (1..={TREE_MAX_CONTEXT_BITS})"))
                 } else {
@@ -230,8 +252,19 @@ fn code_cells<C: BitCoder>(
 ) -> Result<()> {
     let b = bits as usize;
     match mode {
-        Mode::TreeGivenPrevious(k) => {
-            let (pq, pb) = prev.expect("checked by the caller");
+        Mode::TreeGivenPrevious(_) | Mode::Tree => {
+            // One context for the plain tree: as if the previous channel were all zeros.
+            let zeros;
+            let (pq, pb, k) = match mode {
+                Mode::TreeGivenPrevious(k) => {
+                    let (pq, pb) = prev.expect("checked by the caller");
+                    (pq, pb, k)
+                }
+                _ => {
+                    zeros = vec![0u16; q.len()];
+                    (zeros.as_slice(), 1, 0)
+                }
+            };
             let shift = pb.saturating_sub(k);
             let contexts = 1usize << k.min(pb);
             let nodes = 1usize << b;
@@ -339,6 +372,7 @@ pub fn candidate_modes(bits: u8, prev: Option<(&[u16], u8)>) -> Vec<Mode> {
         Mode::ResidualGivenPrevious,
         Mode::ResidualMinusPrevious,
     ];
+    modes.push(Mode::Tree);
     modes.extend([2, 4, 6, 8].map(Mode::TreeGivenPrevious));
     modes
         .into_iter()
@@ -354,13 +388,9 @@ pub fn decode(
     bits: u8,
     prev: Option<(&[u16], u8)>,
 ) -> Result<Vec<u16>> {
-    let mode = match (r.u8("adaptive mode")?, r.u8("adaptive context bits")?) {
-        (0, 0) => Mode::Residual,
-        (1, 0) => Mode::ResidualGivenPrevious,
-        (2, 0) => Mode::ResidualMinusPrevious,
-        (3, k) => Mode::TreeGivenPrevious(k),
-        (m, k) => return Err(bad(&r, format!("adaptive mode {m} with {k} context bits"))),
-    };
+    let (m, k) = (r.u8("adaptive mode")?, r.u8("adaptive context bits")?);
+    let mode = Mode::from_bytes(m, k)
+        .ok_or_else(|| bad(&r, format!("adaptive mode {m} with {k} context bits")))?;
     if let Some(why) = mode.unusable(bits, prev) {
         return Err(bad(&r, format!("adaptive mode {mode:?}: {why}")));
     }
@@ -448,7 +478,7 @@ mod tests {
         let q = noise(100, 5, 9);
         let e = encode(&q, None, 10, 9, Mode::Residual).unwrap();
         // Unknown mode, modes without a previous channel, a tree too wide.
-        for (m, k) in [(4u8, 0u8), (1, 0), (2, 0), (3, 4), (0, 1)] {
+        for (m, k) in [(5u8, 0u8), (1, 0), (2, 0), (3, 4), (0, 1), (4, 1)] {
             let mut bad_e = e.clone();
             bad_e[0] = m;
             bad_e[1] = k;

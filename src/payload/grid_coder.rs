@@ -467,8 +467,14 @@ pub fn encode_best_tabled(
     best
 }
 
+/// A coding that needs the previous channel must be this much smaller than the best one that
+/// does not: chains of dependent channels decode one after another, independent ones in
+/// parallel.
+pub const DEPENDENT_MARGIN: f64 = 0.005;
+
 /// Encode with whichever codec is smallest for this channel: codecs 0-4
-/// ([`encode_best_tabled`]) and every usable mode of codec 5.
+/// ([`encode_best_tabled`]) and every usable mode of codec 5, preferring by
+/// [`DEPENDENT_MARGIN`] those that decode without the previous channel.
 pub fn encode_best(
     q: &[u16],
     prev: Option<(&[u16], u8)>,
@@ -476,18 +482,34 @@ pub fn encode_best(
     bits: u8,
     zstd_level: i32,
 ) -> (GridCodec, Vec<u8>) {
-    let mut best = encode_best_tabled(q, prev, width, bits, zstd_level);
-    if best.0 == GridCodec::Constant {
-        return best;
+    // Codecs 0-3 never need the previous channel; codec 4 always does.
+    let plain = encode_best_tabled(q, None, width, bits, zstd_level);
+    if plain.0 == GridCodec::Constant {
+        return plain;
+    }
+    let mut candidates: Vec<(bool, GridCodec, Vec<u8>)> = vec![(false, plain.0, plain.1)];
+    if let Some((p, _)) = prev.filter(|p| p.1 == bits) {
+        if let Some(d) = encode_histogram(&delta(q, p, bits), zstd_level) {
+            candidates.push((true, GridCodec::HistogramDelta, d));
+        }
     }
     for mode in adaptive_coder::candidate_modes(bits, prev) {
         if let Some(d) = adaptive_coder::encode(q, prev, width, bits, mode) {
-            if d.len() < best.1.len() {
-                best = (GridCodec::Adaptive, d);
-            }
+            candidates.push((mode.needs_previous(), GridCodec::Adaptive, d));
         }
     }
-    best
+    let smallest = |dep: bool| {
+        candidates
+            .iter()
+            .filter(|c| c.0 == dep)
+            .min_by_key(|c| c.2.len())
+            .map(|c| (c.1, c.2.clone()))
+    };
+    let independent = smallest(false).expect("codecs 0-3 always code");
+    match smallest(true) {
+        Some(d) if (d.1.len() as f64) < independent.1.len() as f64 * (1.0 - DEPENDENT_MARGIN) => d,
+        _ => independent,
+    }
 }
 
 pub fn encode_zstd(q: &[u16], bits: u8, level: i32) -> Vec<u8> {

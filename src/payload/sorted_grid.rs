@@ -651,7 +651,11 @@ fn decode_set(
     // parallel and each chain in order (same cells whatever the thread count).
     let needs_previous = |s: &Stored| match s.2 {
         GridCodec::HistogramDelta => true,
-        GridCodec::Adaptive => s.5.first().is_some_and(|&mode| mode != 0),
+        GridCodec::Adaptive => {
+            s.5.get(..2)
+                .and_then(|b| super::adaptive_coder::Mode::from_bytes(b[0], b[1]))
+                .is_none_or(|m| m.needs_previous())
+        }
         _ => false,
     };
     let mut chains: Vec<std::ops::Range<usize>> = Vec::new();

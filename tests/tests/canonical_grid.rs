@@ -297,9 +297,8 @@ fn delta_codec_needs_a_previous_channel_of_the_same_bits() {
 
 #[test]
 fn real_scenes_pick_the_smallest_codec_per_channel() {
-    // The plant at `high`: codec 5 (adaptive, since 1.9) where it is smallest, a tabled codec
-    // where it is not (the last rotation component keeps its histogram), and the round trip
-    // stays exact.
+    // The plant at `high`: codec 5 (adaptive, since 1.9) is the smallest coding of most
+    // channels, and the round trip stays exact.
     let g = load("splat/marcelpadilla_plant.splat");
     let c = Canonical::from_static(g.clone());
     let p = sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap();
@@ -310,8 +309,10 @@ fn real_scenes_pick_the_smallest_codec_per_channel() {
         let len = u32::from_le_bytes(p[r + 10..r + 14].try_into().unwrap()) as usize;
         r += 14 + len;
     }
-    assert!(codecs.contains(&5), "{codecs:?}");
-    assert!(codecs.iter().any(|&c| c != 5), "{codecs:?}");
+    assert!(
+        codecs.iter().filter(|&&c| c == 5).count() >= 10,
+        "{codecs:?}"
+    );
     let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
     let q = quantise_set(&g, &QuantBits::HIGH);
     for k in 11..14 {
