@@ -51,7 +51,8 @@ pub struct CodecArgs {
     pub keep_invisible: bool,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
-    /// at no more bytes than the preset's. Each move codes and renders about 15 candidates.
+    /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
+    /// candidates.
     #[arg(long, value_name = "MOVES", default_value_t = 0)]
     pub reallocate_bits: usize,
     /// Lossy still scenes: store each quantised level, among the 9 nearest the value, with the

@@ -5,7 +5,8 @@
 //! on the lod tiles it buys nothing, on the donut colour is what counts (BENCHMARKS.md
 //! "Canonical compression"). Starting from a preset, this moves one bit at a time from the
 //! attribute group whose bit costs the least quality per byte to the group whose bit buys the
-//! most, as long as the rendered PSNR rises and the coded size stays within the preset's.
+//! most, as long as the rendered PSNR rises and the coded size stays within the preset's (plus
+//! [`BYTES_TOLERANCE`]).
 //!
 //! Distortion is measured by rendering the decoded scene from cameras of its own (5 views at
 //! 35 degrees elevation, 400 x 300), not the 8 benchmark views at 20 degrees, so benchmark
@@ -39,6 +40,12 @@ fn with(b: &QuantBits, g: &str, v: u8) -> QuantBits {
     *b.field_mut(g).expect("a group name") = v;
     b
 }
+
+/// A move may end this fraction above the preset's size: with the adaptive grid codec a move
+/// that buys 2 dB may cost a few dozen bytes more (real donut: rotation 8 / SH DC 9 bits at
+/// `high` is 0.01 % larger and 2.0 dB better; BENCHMARKS.md), and a strict bound would refuse
+/// it.
+pub const BYTES_TOLERANCE: f64 = 0.0025;
 
 /// One accepted move.
 #[derive(Debug, Clone)]
@@ -166,7 +173,7 @@ pub fn reallocate(
                     continue;
                 }
                 let (b, p) = judge.score(&cand)?;
-                if p > psnr && b <= start_bytes {
+                if p > psnr && b as f64 <= start_bytes as f64 * (1.0 + BYTES_TOLERANCE) {
                     accepted = Some((
                         cand,
                         Move {

@@ -436,7 +436,7 @@ fn closest_to_identity_rotations_render_the_same_and_code_smaller() {
 }
 
 #[test]
-fn bit_reallocation_buys_quality_at_no_more_bytes() {
+fn bit_reallocation_buys_quality_within_the_presets_bytes() {
     // The real plant capture (.splat) stores 8-bit opacities: `medium`'s 7 opacity bits
     // merge them in pairs, so the allocator should move a bit there (measured: from rotation,
     // 1,223,506 -> 1,190,199 bytes, 58.24 -> 59.87 dB on its views).
@@ -454,7 +454,13 @@ fn bit_reallocation_buys_quality_at_no_more_bytes() {
         .allocation
         .expect("a still scene with reallocate_bits runs the allocator");
     println!("{a:?}");
-    assert!(a.bytes <= a.start_bytes, "{} > {}", a.bytes, a.start_bytes);
+    assert!(
+        a.bytes as f64
+            <= a.start_bytes as f64 * (1.0 + dlgs_encoder::bit_allocation::BYTES_TOLERANCE),
+        "{} > {}",
+        a.bytes,
+        a.start_bytes
+    );
     assert!(
         a.psnr > a.start_psnr + 1.0,
         "{} vs {}",
@@ -727,7 +733,8 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
 fn tiers_keep_the_image_and_shrink_a_real_scene() {
     // Real donut (45,624 Gaussians, SH 0): the least important Gaussians holding 4.3 % of
     // the blending weight one bit coarser. Measured on the benchmark's 8 views (`dlgs
-    // compare`): 564,874 -> 536,038 B at 58.31 dB both (`--reallocate-bits 4`).
+    // compare`, format 1.9, `--reallocate-bits 4`): 546,670 B at 58.31 dB -> 526,295 B at
+    // 58.38 dB (-3.7 %).
     let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
     let encode = |tiers: Vec<f64>| {
         let cfg = EncoderConfig {
