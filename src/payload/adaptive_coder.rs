@@ -253,26 +253,19 @@ fn code_cells<C: BitCoder>(
     let b = bits as usize;
     match mode {
         Mode::TreeGivenPrevious(_) | Mode::Tree => {
-            // One context for the plain tree: as if the previous channel were all zeros.
-            let zeros;
-            let (pq, pb, k) = match mode {
-                Mode::TreeGivenPrevious(k) => {
-                    let (pq, pb) = prev.expect("checked by the caller");
-                    (pq, pb, k)
+            // The plain tree has one context; the other takes the previous cell's top `k` bits.
+            let (prev_cells, shift, contexts) = match (mode, prev) {
+                (Mode::TreeGivenPrevious(k), Some((pq, pb))) => {
+                    (Some(pq), pb.saturating_sub(k), 1usize << k.min(pb))
                 }
-                _ => {
-                    zeros = vec![0u16; q.len()];
-                    (zeros.as_slice(), 1, 0)
-                }
+                _ => (None, 0, 1),
             };
-            let shift = pb.saturating_sub(k);
-            let contexts = 1usize << k.min(pb);
             let nodes = 1usize << b;
             let mut models = vec![Adaptive::NEW; contexts * nodes];
             for i in 0..q.len() {
                 // Previous cells fit their bits (checked when decoded); `min` keeps a bad
                 // caller from indexing past the models.
-                let ctx = ((pq[i] >> shift) as usize).min(contexts - 1);
+                let ctx = prev_cells.map_or(0, |pq| ((pq[i] >> shift) as usize).min(contexts - 1));
                 let base = ctx * nodes;
                 let mut node = 1usize;
                 for level in (0..b).rev() {
