@@ -21,9 +21,9 @@ use constriction::stream::model::{DecoderModel, EncoderModel, EntropyModel};
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
 use constriction::stream::{Decode, Encode};
 
-use super::grid_coder::{class_of, neighbours, predict, zigzag};
+use super::grid_coder::{bad, class_of, neighbours, predict, read_words, zigzag};
 use crate::bytes::{ByteReader, PutLe};
-use crate::error::{ErrorKind, Result};
+use crate::error::Result;
 
 /// Probability precision of the binary models.
 const PRECISION: usize = 16;
@@ -108,9 +108,8 @@ trait BitCoder {
     fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool>;
     /// A bit with probability 1/2 and no model.
     fn raw(&mut self, bit: bool) -> Result<bool> {
-        let mut half = Adaptive::NEW;
-        let b = self.code(&mut half, bit)?;
-        Ok(b)
+        let mut fresh = Adaptive::NEW;
+        self.code(&mut fresh, bit)
     }
 }
 
@@ -140,13 +139,6 @@ impl BitCoder for Decoder<'_> {
         m.update(bit);
         Ok(bit)
     }
-}
-
-fn bad(r: &ByteReader, reason: String) -> crate::Error {
-    r.err(ErrorKind::Payload {
-        chunk: crate::container::ChunkType::CSOG,
-        reason,
-    })
 }
 
 /// Coding mode of a codec-5 channel.
@@ -387,23 +379,13 @@ pub fn decode(
     if let Some(why) = mode.unusable(bits, prev) {
         return Err(bad(&r, format!("adaptive mode {mode:?}: {why}")));
     }
-    let nwords = r.u32("range coder word count")? as usize;
-    let raw = r.take(
-        nwords
-            .checked_mul(4)
-            .ok_or_else(|| bad(&r, "word count overflows".into()))?,
-        "range coder words",
-    )?;
+    let words = read_words(&mut r)?;
     if r.remaining() != 0 {
         return Err(bad(
             &r,
             format!("{} bytes after the adaptive stream", r.remaining()),
         ));
     }
-    let words: Vec<u32> = raw
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
-        .collect();
     let dec = DefaultRangeDecoder::from_compressed(words)
         .map_err(|_| bad(&r, "range coder stream".into()))?;
     let mut q = vec![0u16; n];

@@ -217,7 +217,7 @@ pub fn encode_predictive(q: &[u16], width: usize, bits: u8) -> Vec<u8> {
     out
 }
 
-fn bad(r: &ByteReader, reason: String) -> crate::Error {
+pub(crate) fn bad(r: &ByteReader, reason: String) -> crate::Error {
     r.err(ErrorKind::Payload {
         chunk: crate::container::ChunkType::CSOG,
         reason,
@@ -225,7 +225,7 @@ fn bad(r: &ByteReader, reason: String) -> crate::Error {
 }
 
 /// A word count (u32) and that many u32 LE words of a range-coded stream.
-fn read_words(r: &mut ByteReader) -> Result<Vec<u32>> {
+pub(crate) fn read_words(r: &mut ByteReader) -> Result<Vec<u32>> {
     let nwords = r.u32("range coder word count")? as usize;
     let raw = r.take(
         nwords
@@ -457,14 +457,22 @@ pub fn encode_best_tabled(
         }
     };
     consider(GridCodec::Histogram, encode_histogram(q, zstd_level));
-    if let Some((prev, pb)) = prev.filter(|p| p.1 == bits) {
-        debug_assert_eq!(pb, bits);
-        consider(
-            GridCodec::HistogramDelta,
-            encode_histogram(&delta(q, prev, bits), zstd_level),
-        );
-    }
+    consider(
+        GridCodec::HistogramDelta,
+        encode_histogram_delta(q, prev, bits, zstd_level),
+    );
     best
+}
+
+/// Codec 4's data: the histogram of the difference from `prev`, when it has the same bits.
+fn encode_histogram_delta(
+    q: &[u16],
+    prev: Option<(&[u16], u8)>,
+    bits: u8,
+    zstd_level: i32,
+) -> Option<Vec<u8>> {
+    let (p, _) = prev.filter(|p| p.1 == bits)?;
+    encode_histogram(&delta(q, p, bits), zstd_level)
 }
 
 /// A coding that needs the previous channel must be this much smaller than the best one that
@@ -488,10 +496,8 @@ pub fn encode_best(
         return plain;
     }
     let mut candidates: Vec<(bool, GridCodec, Vec<u8>)> = vec![(false, plain.0, plain.1)];
-    if let Some((p, _)) = prev.filter(|p| p.1 == bits) {
-        if let Some(d) = encode_histogram(&delta(q, p, bits), zstd_level) {
-            candidates.push((true, GridCodec::HistogramDelta, d));
-        }
+    if let Some(d) = encode_histogram_delta(q, prev, bits, zstd_level) {
+        candidates.push((true, GridCodec::HistogramDelta, d));
     }
     for mode in adaptive_coder::candidate_modes(bits, prev) {
         if let Some(d) = adaptive_coder::encode(q, prev, width, bits, mode) {

@@ -646,7 +646,7 @@ fn decode_set(
         let data = r.take(len, "CSOG channel data")?;
         stored.push((k, bits, codec, min, max, data, at));
     }
-    // Codec 4 and codec 5 (but mode 0) channels need the previous channel's final cells:
+    // Codec 4 and codec 5 modes 1-3 need the previous channel's final cells:
     // split the records into chains that start at an independent channel, decode the chains in
     // parallel and each chain in order (same cells whatever the thread count).
     let needs_previous = |s: &Stored| match s.2 {
