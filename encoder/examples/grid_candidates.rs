@@ -70,7 +70,6 @@ fn main() {
             "codec5_mode": (codec == grid_coder::GridCodec::Adaptive).then(|| [best[0], best[1]]),
             "best": best.len(),
             "tabled": tabled.len(),
-            "predictive": grid_coder::encode_predictive(q, w, *b).len(),
             "histogram": grid_coder::encode_histogram(q, 19).map(|d| d.len()),
             "zstd19": grid_coder::encode_zstd(q, *b, 19).len(),
         });
