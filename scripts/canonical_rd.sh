@@ -18,12 +18,8 @@ echo "| scene | N | format | bytes | bits/G | % of SOG | PSNR dB | SSIM | encode
 echo "|---|---|---|---|---|---|---|---|---|---|"
 source scripts/real_scenes.sh
 for s in "${SCENES[@]}"; do
-  src="$DATA/$s"; name=$(basename "${s%.*}")
-  # Gaussian counts from ../shared/data/MANIFEST.md.
-  case "$name" in
-    *lod3*) n=1971 ;; *fruit*) n=4721 ;; *lod2*) n=6831 ;; *lod1*) n=14051 ;;
-    gsplat*) n=22589 ;; *donut*) n=45624 ;; *plant*) n=113648 ;;
-  esac
+  src="$(scene_path "$s")"; name=$(basename "${s%.*}")
+  n=$(scene_count "$src")
   sog=$(awk -F'\t' -v n="$name" '$1==n && $2=="sog" {print $3}' "$PEERS/times.tsv")
   row() { # format bytes psnr|ssim enc dec
     printf '| %s | %s | %s | %s | %.1f | %.0f %% | %s | %s | %s |\n' "$name" "$n" "$1" "$2" \

@@ -20,7 +20,7 @@ for s in "${SCENES[@]}"; do
     # SOG's SH palette k-means runs on the CPU here (no GPU): slow for SH 3 scenes.
     extra=()
     [ "$fmt" = sog ] && extra=(-g cpu)
-    "${ST[@]}" -q -w "${extra[@]}" "$DATA/$s" "$out"
+    "${ST[@]}" -q -w "${extra[@]}" "$(scene_path "$s")" "$out"
     end=$(date +%s.%N)
     printf '%s\t%s\t%s\t%.1f\n' "$name" "$fmt" "$(stat -c %s "$out")" "$(echo "$end - $start" | bc)" >> "$OUT/times.tsv"
     "${ST[@]}" -q -w "$out" "$out.ply"

@@ -9,3 +9,15 @@ SCENES=(
   ply/v3dg_donut_mipsplatting_45624_sh0.ply
   splat/marcelpadilla_plant.splat
 )
+# DLGS_SCENES="a.ply b.splat": run on these instead (relative to $DATA, or absolute), e.g. the
+# larger scene built from the real ones (scripts/large_scene_rd.sh).
+if [ -n "${DLGS_SCENES:-}" ]; then read -r -a SCENES <<< "$DLGS_SCENES"; fi
+# scene_path S: the file of scene S.
+scene_path() { case "$1" in /*) echo "$1" ;; *) echo "$DATA/$1" ;; esac; }
+# scene_count FILE: its Gaussians (a PLY's vertex count; a .splat is 32 bytes per Gaussian).
+scene_count() {
+  case "$1" in
+    *.splat) echo $(( $(stat -c %s "$1") / 32 )) ;;
+    *) head -c 4096 "$1" | tr -d '\r' | awk '/^element vertex/ {print $3; exit}' ;;
+  esac
+}

@@ -26,7 +26,7 @@ echo "| scene | SPZ bytes | SPZ PSNR dB | smallest dlgs at >= SPZ's PSNR | bytes
 echo "|---|---|---|---|---|---|---|"
 source scripts/real_scenes.sh
 for s in "${SCENES[@]}"; do
-  src="$DATA/$s"; name=$(basename "${s%.*}")
+  src="$(scene_path "$s")"; name=$(basename "${s%.*}")
   spz_bytes=$(stat -c %s "$PEERS/$name.spz")
   spz_psnr=$(psnr "$src" "$PEERS/$name.spz.ply")
   best="none|-|-"

@@ -1,6 +1,6 @@
 //! Probe: drop the Gaussians that add least to 24 views of the scene (3 elevations x 8 azimuths,
 //! not the benchmark's cameras) and write the rest as PLYs, one per fraction:
-//! `cargo run --release -p dlgs-encoder --example prune_probe -- SCENE OUT_PREFIX`.
+//! `cargo run --release -p dlgs-encoder --example prune_probe -- SCENE OUT_PREFIX [F1,F2,..]`.
 
 use dlgs_render::contribution::contributions;
 use dlgs_render::{orbit_cameras, OrbitSpec};
@@ -34,7 +34,15 @@ fn main() {
     std::fs::write(format!("{prefix}-contrib.f64"), raw).unwrap();
     let mut order: Vec<usize> = (0..g.len()).collect();
     order.sort_by(|&a, &b| c[a].total_cmp(&c[b]).then(a.cmp(&b)));
-    for frac in [0.02, 0.05, 0.1, 0.15, 0.2, 0.3] {
+    // Optional third argument: comma-separated fractions.
+    let fracs: Vec<f64> = args
+        .next()
+        .map_or(vec![0.02, 0.05, 0.1, 0.15, 0.2, 0.3], |s| {
+            s.split(',')
+                .map(|f| f.parse().expect("a fraction"))
+                .collect()
+        });
+    for frac in fracs {
         let drop = (g.len() as f64 * frac) as usize;
         let mut keep = vec![true; g.len()];
         for &i in &order[..drop] {

@@ -695,6 +695,27 @@ fn parted_sets_decode_to_their_parts_quantised_and_concatenated() {
 }
 
 #[test]
+fn parted_sets_decode_the_same_floats_on_any_thread_count() {
+    // Each part decodes its channel chains on the thread pool: the joined set must not depend
+    // on the pool size.
+    let (_, c, p) = parted_lod3();
+    let scene = scene_of(&c);
+    let run = |t| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap()
+            .install(|| {
+                let d = sorted_grid::decode(&p, 0, &scene, &Limits::default()).unwrap();
+                dlgs::payload::raw_canonical::canonical_body(&d)
+            })
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(5));
+}
+
+#[test]
 fn parted_sets_with_wrong_counts_give_typed_errors() {
     let (_, c, p) = parted_lod3();
     let scene = scene_of(&c);
