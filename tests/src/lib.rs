@@ -132,3 +132,12 @@ pub fn decode_all_stream(bytes: &[u8], limits: dlgs::Limits) -> dlgs::Result<Vec
     assert!(dec.finished(), "stream finished without End");
     Ok(out)
 }
+
+/// Run `f` on a fresh rayon pool of `threads` threads (determinism tests compare the results).
+pub fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a thread pool")
+        .install(f)
+}

@@ -18,7 +18,7 @@ use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::orientation::closest_to_identity;
 use dlgs_encoder::{CanonicalCodec, EncoderConfig, StreamEncoder};
 use dlgs_render::{metrics, orbit_cameras, render, OrbitSpec, RenderOptions};
-use dlgs_tests::{load, with_synthetic_language};
+use dlgs_tests::{load, on_threads, with_synthetic_language};
 
 fn scene_of(c: &Canonical) -> SceneHeader {
     let mut s = SceneHeader::still(c.statics.len() as u32, c.statics.sh_degree);
@@ -242,15 +242,11 @@ fn degenerate_gaussians_decode_finite_and_nan_is_rejected() {
 fn payload_does_not_depend_on_thread_count() {
     let g = load("ply/supersplat_fruit_drops_minimal_4721_sh3.ply");
     let run = |t| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build()
-            .unwrap()
-            .install(|| {
-                let order = grid_order(&g, SortSpec::REFINED);
-                let c = Canonical::from_static(permute(&g, &order));
-                sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap()
-            })
+        on_threads(t, || {
+            let order = grid_order(&g, SortSpec::REFINED);
+            let c = Canonical::from_static(permute(&g, &order));
+            sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap()
+        })
     };
     assert_eq!(run(1), run(2));
 }
@@ -545,11 +541,9 @@ fn shaped_levels_stay_near_their_values_and_shrink_a_real_sh3_scene() {
             shape_tolerance: tolerance,
             ..Default::default()
         };
-        let bytes = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| dlgs_encoder::encode_still(&g, cfg, Vec::new()).unwrap());
+        let bytes = on_threads(threads, || {
+            dlgs_encoder::encode_still(&g, cfg, Vec::new()).unwrap()
+        });
         let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
         let statics = dec.gop_canonical(0).unwrap().statics.clone();
         (bytes, statics)
@@ -701,14 +695,10 @@ fn parted_sets_decode_the_same_floats_on_any_thread_count() {
     let (_, c, p) = parted_lod3();
     let scene = scene_of(&c);
     let run = |t| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build()
-            .unwrap()
-            .install(|| {
-                let d = sorted_grid::decode(&p, 0, &scene, &Limits::default()).unwrap();
-                dlgs::payload::raw_canonical::canonical_body(&d)
-            })
+        on_threads(t, || {
+            let d = sorted_grid::decode(&p, 0, &scene, &Limits::default()).unwrap();
+            dlgs::payload::raw_canonical::canonical_body(&d)
+        })
     };
     let one = run(1);
     assert_eq!(one, run(2));
