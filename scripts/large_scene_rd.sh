@@ -3,7 +3,7 @@
 # scene of the renderer and decode benchmarks (the plant capture twice plus the donut PLY, side
 # by side; render/src/bench_scenes.rs). SPZ and SOG via splat-transform (scripts/peers.sh), then
 # the canonical_rd.sh rows (raw PLY, SPZ, SOG, dlgs) on it.
-# Usage: bash scripts/large_scene_rd.sh [OUT_DIR]  (default target/peers-large; ~15 min)
+# Usage: bash scripts/large_scene_rd.sh [OUT_DIR]  (default target/peers-large; ~3 min)
 # SETTINGS="..." picks the dlgs rows as in canonical_rd.sh (default: the presets, with and
 # without tiers; --reallocate-bits on 273k Gaussians takes minutes per row).
 set -euo pipefail
