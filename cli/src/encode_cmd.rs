@@ -44,6 +44,12 @@ pub struct CodecArgs {
     /// closest to the identity: same rendering, 2-4 bits less per Gaussian.
     #[arg(long)]
     pub keep_orientation: bool,
+    /// Store the static Gaussians' positions as grid channels, in the grid sort's order
+    /// (layouts 0 and 1), as files before format 1.10. By default they are an octree and the
+    /// Gaussians are stored in an order every reader derives from the positions (layout 2,
+    /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes
+    #[arg(long)]
+    pub grid_positions: bool,
     /// Keep the Gaussians no renderer draws. By default a lossy (`--quality` other than
     /// `lossless`) still scene leaves out every Gaussian whose opacities are below 1/255: they
     /// never reach the 1/255 alpha at which 3DGS compositing starts, so no pixel changes.
@@ -244,6 +250,12 @@ impl CodecArgs {
         if self.tiered() && self.shape > 0.0 {
             bail!("--tiers and --shape cannot be combined");
         }
+        if self.sort_passes > 0 && !self.grid_positions {
+            bail!(
+                "--sort-passes orders grid positions: give --grid-positions too (octree \
+                 positions fix the order themselves)"
+            );
+        }
         Ok(EncoderConfig {
             canonical: self.canonical()?,
             raw_codec: if self.no_zstd {
@@ -281,6 +293,7 @@ impl CodecArgs {
             reallocate_bits: self.reallocate_bits,
             shape_tolerance: self.shape,
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
+            octree_positions: !self.grid_positions,
         })
     }
 

@@ -1,5 +1,5 @@
 //! Bytes per attribute of the sorted-grid canonical codec on a real scene, for each preset and
-//! sort setting: `cargo run --release -p dlgs-encoder --example csog_breakdown -- SCENE`.
+//! sort setting (and with octree positions): `cargo run --release -p dlgs-encoder --example csog_breakdown -- SCENE`.
 
 use std::time::Instant;
 
@@ -12,12 +12,14 @@ fn main() {
         .expect("usage: csog_breakdown SCENE");
     let g = dlgs::interop::read_splat_file(path.as_ref()).expect("readable scene");
     println!("{path}: {} Gaussians, SH {}", g.len(), g.sh_degree);
-    for (label, sort) in [
-        ("file order", None),
-        ("k-d only", Some(SortSpec::NONE)),
-        ("passes 1", Some(SortSpec::FAST)),
-        ("passes 3", Some(SortSpec::REFINED)),
-        ("passes 8", Some(SortSpec { passes: 8 })),
+    // "octree": positions as an octree, the order derived from them (layout 2, the default).
+    for (label, sort, octree) in [
+        ("octree", None, true),
+        ("file order", None, false),
+        ("k-d only", Some(SortSpec::NONE), false),
+        ("passes 1", Some(SortSpec::FAST), false),
+        ("passes 3", Some(SortSpec::REFINED), false),
+        ("passes 8", Some(SortSpec { passes: 8 }), false),
     ] {
         let start = Instant::now();
         let order: Vec<u32> = match sort {
@@ -31,7 +33,7 @@ fn main() {
             ("medium", QuantBits::MEDIUM),
             ("low", QuantBits::LOW),
         ] {
-            let b = breakdown(&sorted, &bits, 9);
+            let b = breakdown(&sorted, &bits, 9, octree);
             let total: usize = b.iter().map(|x| x.1).sum();
             let parts: Vec<String> = b
                 .iter()

@@ -75,6 +75,8 @@ struct Judge {
     cams: Vec<Camera>,
     reference: Vec<f32>,
     zstd_level: i32,
+    /// Code as the encoder will: octree positions (layout 2) or grid positions (layout 0).
+    octree: bool,
 }
 
 /// All views of `g`, one after the other.
@@ -95,7 +97,18 @@ fn images(g: &Gaussians, cams: &[Camera]) -> Result<Vec<f32>> {
 impl Judge {
     /// Coded bytes and PSNR (over all views' pixels at once) of `bits`.
     fn score(&self, bits: &QuantBits) -> Result<(usize, f64)> {
-        let payload = sorted_grid::encode(&self.canon, bits, self.zstd_level)?;
+        let payload = if self.octree {
+            let part = [(self.canon.statics.clone(), *bits)];
+            let gop = sorted_grid::PartedGop {
+                static_parts: &part,
+                static_weight: None,
+                dynamics: &self.canon.dynamics,
+                dynamic_bits: bits,
+            };
+            sorted_grid::encode_octree(&gop, self.zstd_level)?.0
+        } else {
+            sorted_grid::encode(&self.canon, bits, self.zstd_level)?
+        };
         let decoded = sorted_grid::decode(&payload, 0, &self.scene, &Limits::default())?.statics;
         let psnr = metrics::psnr(&self.reference, &images(&decoded, &self.cams)?);
         Ok((payload.len(), psnr))
@@ -110,6 +123,7 @@ pub fn reallocate(
     start: QuantBits,
     zstd_level: i32,
     max_moves: usize,
+    octree: bool,
     mut progress: impl FnMut(&Move),
 ) -> Result<Allocation> {
     let spec = OrbitSpec {
@@ -126,6 +140,7 @@ pub fn reallocate(
         reference: images(g, &cams)?,
         cams,
         zstd_level,
+        octree,
     };
     let groups: Vec<&'static str> = GROUPS
         .into_iter()

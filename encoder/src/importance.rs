@@ -58,13 +58,14 @@ pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
 /// (descending, each in (0, 1)) is the share of the summed blending weight held by the least
 /// important Gaussians stored `j + 1` bits coarser than `bits` (those of a later, smaller
 /// fraction go to the later part). The most important Gaussians are the first part, at `bits`.
-/// Each part is grid-sorted on its own; empty parts are left out. Also returns the stored
-/// order (indices into `g`).
+/// With `grid_sort`, each part is grid-sorted on its own; empty parts are left out. Also returns
+/// the parts' order (indices into `g`).
 pub fn tiers(
     g: &Gaussians,
     fractions: &[f64],
     sort: SortSpec,
     bits: QuantBits,
+    grid_sort: bool,
 ) -> (Vec<(Gaussians, QuantBits)>, Vec<u32>) {
     let blend = contributions(g, &importance_views(g));
     // Tier of each Gaussian: how many of the fractions it falls under.
@@ -84,7 +85,11 @@ pub fn tiers(
             continue;
         }
         let subset = permute(g, &idx);
-        let local = grid_order(&subset, sort);
+        let local = if grid_sort {
+            grid_order(&subset, sort)
+        } else {
+            (0..subset.len() as u32).collect()
+        };
         order.extend(local.iter().map(|&j| idx[j as usize]));
         parts.push((permute(&subset, &local), bits.coarser(t as u8)));
     }

@@ -43,13 +43,13 @@ pub const TREE_MAX_CONTEXT_BITS: u8 = 8;
 /// An adaptive binary model: `p` = probability of a 0 bit in units of `2^-16`, and how many
 /// bits it has seen (its adaptation is fast at first, then settles at `1/64`).
 #[derive(Clone, Copy)]
-struct Adaptive {
+pub(crate) struct Adaptive {
     p: u16,
     seen: u8,
 }
 
 impl Adaptive {
-    const NEW: Adaptive = Adaptive {
+    pub(crate) const NEW: Adaptive = Adaptive {
         p: (ONE / 2) as u16,
         seen: 0,
     };
@@ -104,7 +104,7 @@ impl DecoderModel<PRECISION> for Binary {
 
 /// One direction of the coder: the encoder codes `bit` and returns it; the decoder ignores it
 /// and returns the decoded bit.
-trait BitCoder {
+pub(crate) trait BitCoder {
     fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool>;
     /// A bit with probability 1/2 and no model.
     fn raw(&mut self, bit: bool) -> Result<bool> {
@@ -113,7 +113,7 @@ trait BitCoder {
     }
 }
 
-struct Encoder(DefaultRangeEncoder);
+pub(crate) struct Encoder(pub(crate) DefaultRangeEncoder);
 
 impl BitCoder for Encoder {
     fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool> {
@@ -125,9 +125,9 @@ impl BitCoder for Encoder {
     }
 }
 
-struct Decoder<'a> {
-    dec: DefaultRangeDecoder,
-    r: &'a ByteReader<'a>,
+pub(crate) struct Decoder<'a> {
+    pub(crate) dec: DefaultRangeDecoder,
+    pub(crate) r: &'a ByteReader<'a>,
 }
 
 impl BitCoder for Decoder<'_> {

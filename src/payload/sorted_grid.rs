@@ -11,7 +11,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;
 use crate::model::{sigmoid, Canonical, Gaussians};
 use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::grid_shaping;
+use crate::payload::{grid_shaping, kd_layout, octree_positions};
 
 /// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -351,24 +351,76 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
     QuantisedSet { channels }
 }
 
+/// A set's channels as coded, and with positions as an octree (§6.5.5) the octree, whose
+/// channel records are then left out of `channels`' payload (they are still listed first).
+struct CodedSet {
+    channels: Vec<Channel>,
+    octree: Option<Vec<u8>>,
+    /// `order[k]` = index in the given set of the Gaussian stored `k`-th.
+    order: Vec<u32>,
+}
+
 /// Quantise and code every channel of a set, in payload order. With `weight` (one per
 /// Gaussian: bits one squared quantisation step of its error is worth) the channels are shaped
-/// first ([`shape_channels`]).
+/// first ([`shape_channels`]). With `octree`, positions are coded as an octree and the set is
+/// stored in the order readers derive from them ([`kd_layout`]), not the order given.
 fn code_set(
     g: &Gaussians,
     bits: &QuantBits,
     zstd_level: i32,
     weight: Option<&[f32]>,
-) -> Vec<Channel> {
+    octree: bool,
+) -> CodedSet {
     let w = grid_width(g.len()).max(1);
     let mut chans = quantise_set(g, bits).channels;
+    let mut order: Vec<u32> = (0..g.len() as u32).collect();
+    let mut tree = None;
+    let reordered;
+    let (g, weight) = if octree {
+        let points: Vec<[u16; 3]> = (0..g.len())
+            .map(|i| [chans[0].3[i], chans[1].3[i], chans[2].3[i]])
+            .collect();
+        let (data, morton) = octree_positions::encode(&points, bits.position);
+        let in_morton: Vec<[u16; 3]> = morton.iter().map(|&i| points[i as usize]).collect();
+        let step = position_steps(&chans);
+        order = kd_layout::kd_layout(&in_morton, step)
+            .into_iter()
+            .map(|k| morton[k as usize])
+            .collect();
+        for c in chans.iter_mut() {
+            c.3 = order.iter().map(|&i| c.3[i as usize]).collect();
+        }
+        let mut r = Gaussians::new(g.sh_degree, g.lang_width);
+        for &i in &order {
+            r.push_from(g, i as usize);
+        }
+        reordered = (
+            r,
+            weight.map(|w| order.iter().map(|&i| w[i as usize]).collect::<Vec<f32>>()),
+        );
+        tree = Some(data);
+        (&reordered.0, reordered.1.as_deref())
+    } else {
+        (g, weight)
+    };
+    // Octree positions are final: shaping starts after them.
+    let first = if octree { 3 } else { 0 };
     if let Some(weight) = weight {
-        shape_channels(g, &mut chans, weight, w, zstd_level);
+        shape_channels(g, &mut chans, weight, w, zstd_level, first);
     }
-    (0..chans.len())
+    let channels = (0..chans.len())
         .into_par_iter()
         .map(|j| {
             let (b, min, max, q) = &chans[j];
+            if j < first {
+                return Channel {
+                    bits: *b,
+                    min: *min,
+                    max: *max,
+                    codec: GridCodec::Constant,
+                    data: Vec::new(),
+                };
+            }
             // Codecs 4 and 5 may code against the previous channel.
             let prev = j
                 .checked_sub(1)
@@ -382,22 +434,35 @@ fn code_set(
                 data,
             }
         })
-        .collect()
+        .collect();
+    CodedSet {
+        channels,
+        octree: tree,
+        order,
+    }
+}
+
+/// Scene distance of one quantisation step of each position channel (the first three).
+fn position_steps(chans: &[(u8, f32, f32, Vec<u16>)]) -> [f64; 3] {
+    let step =
+        |c: &(u8, f32, f32, Vec<u16>)| (c.2 as f64 - c.1 as f64).max(0.0) / (levels(c.0) as f64);
+    [step(&chans[0]), step(&chans[1]), step(&chans[2])]
 }
 
 /// Replace each channel's nearest levels (but the rotation index's) by the [`grid_shaping`]
-/// variant, or the nearest levels themselves, that codes smallest. In payload order: codec 4
-/// and its shaper need the previous channel's final cells.
+/// variant, or the nearest levels themselves, that codes smallest, from channel `first` on. In
+/// payload order: codec 4 and its shaper need the previous channel's final cells.
 fn shape_channels(
     g: &Gaussians,
     chans: &mut [(u8, f32, f32, Vec<u16>)],
     weight: &[f32],
     width: usize,
     zstd_level: i32,
+    first: usize,
 ) {
     assert_eq!(weight.len(), g.len(), "one weight per Gaussian");
     let kinds = channels(g);
-    for j in 0..chans.len() {
+    for j in first..chans.len() {
         let (b, min, max, ref q0) = chans[j];
         if kinds[j] == Kind::RotIndex || !(max > min) {
             continue;
@@ -440,17 +505,33 @@ fn shape_channels(
 
 /// Bytes of a channel record before its data: bits, codec, min, max, len (§6.5.2).
 const CHANNEL_HEADER_LEN: usize = 14;
+/// Bytes of an octree set's position record before the octree: bits, three ranges, len.
+const OCTREE_HEADER_LEN: usize = 29;
 
+/// Write a set (or, with `octree`, an octree set, §6.5.5); returns the stored order (indices
+/// into `g`).
 fn encode_set(
     out: &mut Vec<u8>,
     g: &Gaussians,
     bits: &QuantBits,
     zstd_level: i32,
     weight: Option<&[f32]>,
-) {
-    let chans = code_set(g, bits, zstd_level, weight);
+    octree: bool,
+) -> Vec<u32> {
+    let coded = code_set(g, bits, zstd_level, weight, octree);
     out.put_u32(grid_width(g.len()) as u32);
-    out.put_u16(chans.len() as u16);
+    out.put_u16(coded.channels.len() as u16);
+    let mut chans = coded.channels.iter();
+    if let Some(tree) = &coded.octree {
+        let pos: Vec<&Channel> = chans.by_ref().take(3).collect();
+        out.put_u8(pos[0].bits);
+        for c in pos {
+            out.put_f32(c.min);
+            out.put_f32(c.max);
+        }
+        out.put_u32(tree.len() as u32);
+        out.extend_from_slice(tree);
+    }
     for c in chans {
         out.put_u8(c.bits);
         out.put_u8(c.codec as u8);
@@ -459,14 +540,32 @@ fn encode_set(
         out.put_u32(c.data.len() as u32);
         out.extend_from_slice(&c.data);
     }
+    coded.order
 }
 
-/// Coded bytes per attribute group of one set, for reports: (group name, bytes).
-pub fn breakdown(g: &Gaussians, bits: &QuantBits, zstd_level: i32) -> Vec<(&'static str, usize)> {
+/// Coded bytes per attribute group of one set, for reports: (group name, bytes). With
+/// `octree`, the octree is counted as the first position channel.
+pub fn breakdown(
+    g: &Gaussians,
+    bits: &QuantBits,
+    zstd_level: i32,
+    octree: bool,
+) -> Vec<(&'static str, usize)> {
     let kinds = channels(g);
-    let sizes = code_set(g, bits, zstd_level, None)
+    let coded = code_set(g, bits, zstd_level, None, octree);
+    let tree = coded
+        .octree
+        .as_ref()
+        .map_or(0, |t| t.len() + OCTREE_HEADER_LEN);
+    let sizes = coded
+        .channels
         .into_iter()
-        .map(|c| c.data.len() + CHANNEL_HEADER_LEN);
+        .enumerate()
+        .map(|(j, c)| match j {
+            0 if octree => tree,
+            0..3 if octree => 0,
+            _ => c.data.len() + CHANNEL_HEADER_LEN,
+        });
     let mut out: Vec<(&'static str, usize)> = Vec::new();
     for (k, s) in kinds.iter().zip(sizes) {
         let name = match k {
@@ -521,8 +620,8 @@ pub fn encode_shaped(
     c.statics.check_finite()?;
     c.dynamics.check_finite()?;
     let mut out = vec![0u8]; // layout version
-    encode_set(&mut out, &c.statics, bits, zstd_level, static_weight);
-    encode_set(&mut out, &c.dynamics, bits, zstd_level, None);
+    encode_set(&mut out, &c.statics, bits, zstd_level, static_weight, false);
+    encode_set(&mut out, &c.dynamics, bits, zstd_level, None, false);
     Ok(out)
 }
 
@@ -538,7 +637,36 @@ pub fn encode_parts(
     dynamic_bits: &QuantBits,
     zstd_level: i32,
 ) -> Result<Vec<u8>> {
+    let parts = PartedGop {
+        static_parts,
+        static_weight: None,
+        dynamics,
+        dynamic_bits,
+    };
+    Ok(encode_parted(&parts, zstd_level, false)?.0)
+}
+
+/// A canonical GOP to store as parts (layouts 1 and 2).
+pub struct PartedGop<'a> {
+    /// The static set's parts, each with its bits, in stored order.
+    pub static_parts: &'a [(Gaussians, QuantBits)],
+    /// Shaping weights (§6.5.4), one per static Gaussian of all parts in order.
+    pub static_weight: Option<&'a [f32]>,
+    pub dynamics: &'a Gaussians,
+    pub dynamic_bits: &'a QuantBits,
+}
+
+/// Encode a canonical GOP in layout 2 (§6.5.2, since 1.10): as [`encode_parts`], but each
+/// static part's positions are an octree and its Gaussians are stored in the order readers
+/// derive from them (§6.5.5). Returns the payload and that order: `order[k]` = index, in the
+/// parts' concatenation, of the `k`-th static Gaussian stored.
+pub fn encode_octree(gop: &PartedGop, zstd_level: i32) -> Result<(Vec<u8>, Vec<u32>)> {
+    encode_parted(gop, zstd_level, true)
+}
+
+fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<u8>, Vec<u32>)> {
     let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
+    let static_parts = gop.static_parts;
     if !(1..=MAX_PARTS).contains(&static_parts.len()) {
         return Err(bad(format!(
             "{} static parts (1..={MAX_PARTS})",
@@ -548,7 +676,7 @@ pub fn encode_parts(
     let all = static_parts
         .iter()
         .map(|(g, b)| (g, b))
-        .chain([(dynamics, dynamic_bits)]);
+        .chain([(gop.dynamics, gop.dynamic_bits)]);
     for (g, b) in all {
         if let Some(x) = b.all().into_iter().find(|x| !(1..=16).contains(x)) {
             return Err(bad(format!("quantisation bits must be 1..=16, got {x}")));
@@ -556,16 +684,37 @@ pub fn encode_parts(
         g.check_shapes()?;
         g.check_finite()?;
     }
-    let mut out = vec![1u8]; // layout version
+    let n_static: usize = static_parts.iter().map(|p| p.0.len()).sum();
+    if let Some(s) = gop.static_weight {
+        if s.len() != n_static || s.iter().any(|w| !(*w >= 0.0)) {
+            return Err(bad(format!(
+                "{} shaping weights (each >= 0) for {n_static} static Gaussians",
+                s.len()
+            )));
+        }
+    }
+    let mut out = vec![if octree { 2u8 } else { 1 }]; // layout version
     out.put_u8(static_parts.len() as u8);
+    let mut order = Vec::with_capacity(n_static);
+    let mut start = 0;
     for (g, b) in static_parts {
         out.put_u32(g.len() as u32);
-        encode_set(&mut out, g, b, zstd_level, None);
+        let weight = gop.static_weight.map(|w| &w[start..start + g.len()]);
+        let local = encode_set(&mut out, g, b, zstd_level, weight, octree);
+        order.extend(local.into_iter().map(|i| i + start as u32));
+        start += g.len();
     }
     out.put_u8(1);
-    out.put_u32(dynamics.len() as u32);
-    encode_set(&mut out, dynamics, dynamic_bits, zstd_level, None);
-    Ok(out)
+    out.put_u32(gop.dynamics.len() as u32);
+    encode_set(
+        &mut out,
+        gop.dynamics,
+        gop.dynamic_bits,
+        zstd_level,
+        None,
+        false,
+    );
+    Ok((out, order))
 }
 
 fn bad_at(reason: String, at: u64) -> Error {
@@ -584,6 +733,7 @@ fn decode_set(
     sh_degree: u8,
     lang_width: usize,
     limits: &Limits,
+    octree: bool,
 ) -> Result<Gaussians> {
     let mut g = Gaussians::new(sh_degree, lang_width);
     let kinds = channels(&g);
@@ -611,9 +761,20 @@ fn decode_set(
         (n as u64) * 2 * kinds.len() as u64,
         at,
     )?;
+    // An octree set's positions come first, already in grid order (§6.5.5).
     type Stored<'a> = (Kind, u8, GridCodec, f32, f32, &'a [u8], u64);
     let mut stored: Vec<Stored> = Vec::with_capacity(kinds.len());
-    for &k in &kinds {
+    let mut positions: Vec<Vec<u16>> = Vec::new();
+    if octree {
+        let (bits, ranges, cells) = decode_octree_positions(r, n)?;
+        for (a, cells) in cells.into_iter().enumerate() {
+            let (min, max) = ranges[a];
+            stored.push((kinds[a], bits, GridCodec::Constant, min, max, &[], 0));
+            positions.push(cells);
+        }
+    }
+    let first = positions.len();
+    for &k in &kinds[first..] {
         let at = r.offset();
         let bits = r.u8("CSOG channel bits")?;
         let is_index = k == Kind::RotIndex;
@@ -648,7 +809,8 @@ fn decode_set(
     }
     // Codec 4 and codec 5 modes 1-3 need the previous channel's final cells:
     // split the records into chains that start at an independent channel, decode the chains in
-    // parallel and each chain in order (same cells whatever the thread count).
+    // parallel and each chain in order (same cells whatever the thread count). A chain that
+    // starts right after octree positions continues from their last channel.
     let needs_previous = |s: &Stored| match s.2 {
         GridCodec::HistogramDelta => true,
         GridCodec::Adaptive => {
@@ -659,7 +821,7 @@ fn decode_set(
         _ => false,
     };
     let mut chains: Vec<std::ops::Range<usize>> = Vec::new();
-    for j in 0..stored.len() {
+    for j in first..stored.len() {
         match chains.last_mut() {
             Some(c) if needs_previous(&stored[j]) => c.end = j + 1,
             _ => chains.push(j..j + 1),
@@ -671,7 +833,13 @@ fn decode_set(
             let mut out: Vec<Vec<u16>> = Vec::with_capacity(range.len());
             for j in range.clone() {
                 let (_, bits, codec, _, _, data, at) = stored[j];
-                let prev = out.last().map(|p| (p.as_slice(), stored[j - 1].1));
+                let prev = match out.last() {
+                    Some(p) => Some((p.as_slice(), stored[j - 1].1)),
+                    None if j > 0 && j == first => {
+                        Some((positions[j - 1].as_slice(), stored[j - 1].1))
+                    }
+                    None => None,
+                };
                 let mut q =
                     grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits, prev)?;
                 if codec == GridCodec::HistogramDelta {
@@ -683,7 +851,10 @@ fn decode_set(
             Ok(out)
         })
         .collect::<Result<_>>()?;
-    let cells: Vec<Vec<u16>> = decoded_chains.into_iter().flatten().collect();
+    let cells: Vec<Vec<u16>> = positions
+        .into_iter()
+        .chain(decoded_chains.into_iter().flatten())
+        .collect();
     let decoded: Vec<(u8, Vec<f32>)> = stored
         .par_iter()
         .zip(cells)
@@ -742,6 +913,35 @@ fn decode_set(
     Ok(g)
 }
 
+/// An octree set's position record (§6.5.5): bits, three ranges and the octree, decoded and
+/// laid out in grid order. Returns the bits, the ranges and the three position channels' cells.
+#[allow(clippy::type_complexity)]
+fn decode_octree_positions(
+    r: &mut ByteReader,
+    n: usize,
+) -> Result<(u8, [(f32, f32); 3], [Vec<u16>; 3])> {
+    let at = r.offset();
+    let bits = r.u8("CSOG octree bits")?;
+    if !(1..=octree_positions::MAX_BITS).contains(&bits) {
+        return Err(bad_at(format!("octree positions of {bits} bits"), at));
+    }
+    let mut ranges = [(0.0f32, 0.0f32); 3];
+    for range in ranges.iter_mut() {
+        *range = (
+            r.finite_f32("CSOG position min")?,
+            r.finite_f32("CSOG position max")?,
+        );
+    }
+    let len = r.u32("CSOG octree length")? as usize;
+    let at = r.offset();
+    let data = r.take(len, "CSOG octree data")?;
+    let points = octree_positions::decode(ByteReader::new(data, at), n, bits)?;
+    let step = ranges.map(|(min, max)| (max as f64 - min as f64).max(0.0) / levels(bits) as f64);
+    let order = kd_layout::kd_layout(&points, step);
+    let axis = |a: usize| order.iter().map(|&i| points[i as usize][a]).collect();
+    Ok((bits, ranges, [axis(0), axis(1), axis(2)]))
+}
+
 /// A set stored as parts (layout 1): a part count, then per part its Gaussian count and its
 /// set record; the counts must add up to `n`.
 fn decode_parts(
@@ -750,6 +950,7 @@ fn decode_parts(
     sh_degree: u8,
     lang_width: usize,
     limits: &Limits,
+    octree: bool,
 ) -> Result<Gaussians> {
     let at = r.offset();
     let parts = r.u8("CSOG part count")? as usize;
@@ -768,7 +969,7 @@ fn decode_parts(
             ));
         }
         left -= np;
-        g.extend(&decode_set(r, np, sh_degree, lang_width, limits)?);
+        g.extend(&decode_set(r, np, sh_degree, lang_width, limits, octree)?);
     }
     if left != 0 {
         return Err(bad_at(
@@ -801,16 +1002,16 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let (ns, nd) = (scene.n_static as usize, scene.n_dynamic as usize);
     let (statics, dynamics) = match version {
         0 => (
-            decode_set(&mut r, ns, sh, lw, limits)?,
-            decode_set(&mut r, nd, sh, lw, limits)?,
+            decode_set(&mut r, ns, sh, lw, limits, false)?,
+            decode_set(&mut r, nd, sh, lw, limits, false)?,
         ),
-        1 => (
-            decode_parts(&mut r, ns, sh, lw, limits)?,
-            decode_parts(&mut r, nd, sh, lw, limits)?,
+        1 | 2 => (
+            decode_parts(&mut r, ns, sh, lw, limits, version == 2)?,
+            decode_parts(&mut r, nd, sh, lw, limits, false)?,
         ),
         _ => {
             return Err(bad_at(
-                format!("layout version {version} (this reader knows 0 and 1)"),
+                format!("layout version {version} (this reader knows 0, 1 and 2)"),
                 at,
             ))
         }

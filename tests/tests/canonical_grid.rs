@@ -166,11 +166,13 @@ fn statics_are_sorted_dynamics_keep_their_order() {
             statics.push_from(&g, i)
         }
     }
+    // Grid positions: the static set is stored in the grid sort's order (layout 0).
     let cfg = EncoderConfig {
         canonical: CanonicalCodec::Sorted {
             bits: QuantBits::HIGH,
             sort: SortSpec::DEFAULT,
         },
+        octree_positions: false,
         ..Default::default()
     };
     // A dynamic scene needs a deformation field; check the payload directly instead.
@@ -736,8 +738,8 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
         err(&b)
     );
     let mut b = p.clone();
-    b[0] = 2;
-    assert!(err(&b).contains("layout version 2"), "{}", err(&b));
+    b[0] = 3;
+    assert!(err(&b).contains("layout version 3"), "{}", err(&b));
 }
 
 #[test]
@@ -796,4 +798,135 @@ fn tiers_keep_the_image_and_shrink_a_real_scene() {
         one.len()
     );
     assert!(p2 > p1 - 0.5, "tiers {p2:.2} dB vs {p1:.2} dB");
+}
+
+/// A GOP in layout 2: the source, its static parts, the payload and the stored static order.
+type OctreeGop = (Canonical, Vec<(Gaussians, QuantBits)>, Vec<u8>, Vec<u32>);
+
+/// Layout 2 of the real lod3 scene in three parts, with the dynamic set the last 200.
+fn octree_lod3() -> OctreeGop {
+    let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    let cut = |r: std::ops::Range<u32>| permute(&g, &r.collect::<Vec<u32>>());
+    let parts = vec![
+        (cut(0..1500), QuantBits::MEDIUM),
+        (cut(1500..1700), QuantBits::LOW),
+        (cut(1700..1771), QuantBits::LOW.coarser(2)),
+    ];
+    let dynamics = cut(1771..1971);
+    let gop = sorted_grid::PartedGop {
+        static_parts: &parts,
+        static_weight: None,
+        dynamics: &dynamics,
+        dynamic_bits: &QuantBits::HIGH,
+    };
+    let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
+    let c = Canonical {
+        statics: cut(0..1771),
+        dynamics,
+    };
+    (c, parts, p, order)
+}
+
+#[test]
+fn octree_sets_decode_in_the_order_the_encoder_reports() {
+    // Layout 2 (format 1.10): each static part's positions are an octree and the part is
+    // stored in the k-d order of its decoded positions; the dynamic set keeps its order.
+    let (c, parts, p, order) = octree_lod3();
+    assert_eq!(p[0], 2, "layout 2");
+    let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+    assert_eq!(d.statics.len(), c.statics.len());
+    let mut seen = order.clone();
+    seen.sort_unstable();
+    assert_eq!(seen, (0..c.statics.len() as u32).collect::<Vec<_>>());
+    assert_ne!(order, seen, "the octree's order is not the given one");
+    // Each part's Gaussians stay in that part, each attribute within its part's step.
+    let mut start = 0usize;
+    for (part, bits) in &parts {
+        let q = quantise_set(part, bits);
+        let step =
+            |j: usize| (q.channels[j].2 - q.channels[j].1) / ((1u32 << q.channels[j].0) - 1) as f32;
+        for k in start..start + part.len() {
+            let i = order[k] as usize;
+            assert!(
+                (start..start + part.len()).contains(&i),
+                "Gaussian {i} left its part"
+            );
+            for a in 0..3 {
+                let e = (d.statics.positions[k][a] - c.statics.positions[i][a]).abs();
+                assert!(e <= 0.5 * step(a) * 1.001 + 1e-6, "position {k}/{a}: {e}");
+                let e = (d.statics.sh[k * 48 + a] - c.statics.sh[i * 48 + a]).abs();
+                let j = 11 + a; // SH DC channels follow 3 + 3 + 1 + 3 + 1
+                assert!(e <= 0.5 * step(j) * 1.001 + 1e-6, "SH DC {k}/{a}: {e}");
+            }
+        }
+        start += part.len();
+    }
+    for i in 0..c.dynamics.len() {
+        for a in 0..3 {
+            assert!((d.dynamics.positions[i][a] - c.dynamics.positions[i][a]).abs() < 1e-3);
+        }
+    }
+    // Octree positions code smaller than grid positions in the best grid order.
+    let sorted: Vec<(Gaussians, QuantBits)> = parts
+        .iter()
+        .map(|(g, b)| (permute(g, &grid_order(g, SortSpec::DEFAULT)), *b))
+        .collect();
+    let grid = sorted_grid::encode_parts(&sorted, &c.dynamics, &QuantBits::HIGH, 3).unwrap();
+    assert!(
+        p.len() < grid.len(),
+        "octree {} B, grid {} B",
+        p.len(),
+        grid.len()
+    );
+}
+
+#[test]
+fn octree_sets_decode_the_same_floats_on_any_thread_count() {
+    let (c, _, p, _) = octree_lod3();
+    let run = |n: usize| {
+        on_threads(n, || {
+            let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+            dlgs::payload::raw_canonical::canonical_body(&d)
+        })
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(5));
+}
+
+#[test]
+fn damaged_octree_sets_give_typed_errors_not_panics() {
+    let (c, _, p, _) = octree_lod3();
+    let scene = scene_of(&c);
+    // Byte 0 layout, 1 part count, 2..6 the first part's count, 6..10 width, 10..12 channels,
+    // 12 position bits, 13..37 ranges, 37..41 octree length.
+    let err = |b: &[u8]| {
+        sorted_grid::decode(b, 0, &scene, &Limits::default())
+            .unwrap_err()
+            .to_string()
+    };
+    for bits in [0u8, 17] {
+        let mut b = p.clone();
+        b[12] = bits;
+        assert!(
+            err(&b).contains(&format!("octree positions of {bits} bits")),
+            "{}",
+            err(&b)
+        );
+    }
+    let mut b = p.clone();
+    b[13..17].copy_from_slice(&f32::NAN.to_le_bytes());
+    assert!(err(&b).contains("position min"), "{}", err(&b));
+    let mut b = p.clone();
+    b[37..41].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(err(&b).contains("octree data"), "{}", err(&b));
+    // Flipped bits anywhere in the first part: an error or a different set, never a panic.
+    let mut s = 5u32;
+    for _ in 0..300 {
+        s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        let mut b = p.clone();
+        let at = 41 + (s as usize >> 8) % 4000;
+        b[at] ^= 1 << (s % 8);
+        let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
+    }
 }
