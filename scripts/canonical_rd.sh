@@ -10,7 +10,9 @@ PEERS=${1:-target/peers}
 DATA=${DLGS_DATA:-../shared/data}
 OUT=target/canonical_rd
 mkdir -p "$OUT"
-cargo build --release -q -p dlgs-cli -p dlgs-decoder --example decode_timing
+# `--example` alone would build only the example, not the `dlgs` binary.
+cargo build --release -q -p dlgs-cli
+cargo build --release -q -p dlgs-decoder --example decode_timing
 DLGS=target/release/dlgs
 export RUST_BACKTRACE=0
 metric() { $DLGS compare "$1" "$2" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f | %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
