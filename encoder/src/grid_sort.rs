@@ -9,6 +9,7 @@
 //! with the same result on any thread count.
 
 use dlgs::model::Gaussians;
+use dlgs::payload::kd_layout::{first_valid, halves, valid_in};
 use dlgs::payload::sorted_grid::grid_width;
 use rayon::prelude::*;
 
@@ -70,20 +71,6 @@ fn features(g: &Gaussians) -> Vec<[f32; DIMS]> {
     f
 }
 
-/// Cells `0..n` of a `width`-wide grid inside the rectangle are those with row-major index < n.
-fn valid_in(x0: usize, y0: usize, w: usize, h: usize, width: usize, n: usize) -> usize {
-    (y0..y0 + h)
-        .map(|y| {
-            let row_start = y * width;
-            if row_start >= n {
-                0
-            } else {
-                (n - row_start).saturating_sub(x0).min(w)
-            }
-        })
-        .sum()
-}
-
 /// Recursive median split: the rectangle's Gaussians are split along the position axis of
 /// largest spread into the two halves of the rectangle's longer side.
 fn place(
@@ -94,30 +81,17 @@ fn place(
     n: usize,
     grid: &mut [u32],
 ) {
-    let (x0, y0, w, h) = rect;
+    let (_, _, w, h) = rect;
     if idx.is_empty() {
         return;
     }
     if idx.len() == 1 || w * h == 1 {
-        // The one valid cell of the rectangle (the first in row-major order).
-        for y in y0..y0 + h {
-            for x in x0..x0 + w {
-                let c = y * width + x;
-                if c < n {
-                    grid[c] = idx[0];
-                    return;
-                }
-            }
+        if let Some(c) = first_valid(rect, width, n) {
+            grid[c] = idx[0];
         }
         return;
     }
-    let (ra, rb) = if w >= h {
-        let w1 = w / 2;
-        ((x0, y0, w1, h), (x0 + w1, y0, w - w1, h))
-    } else {
-        let h1 = h / 2;
-        ((x0, y0, w, h1), (x0, y0 + h1, w, h - h1))
-    };
+    let (ra, rb) = halves(rect);
     let na = valid_in(ra.0, ra.1, ra.2, ra.3, width, n);
     let axis = (0..3)
         .max_by(|&a, &b| {

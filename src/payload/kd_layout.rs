@@ -19,6 +19,25 @@ pub fn valid_in(x0: usize, y0: usize, w: usize, h: usize, width: usize, n: usize
         .sum()
 }
 
+/// A grid rectangle: first column, first row, width, height.
+pub type Rect = (usize, usize, usize, usize);
+
+/// The two halves of a rectangle, split across its longer side (columns when `w >= h`).
+pub fn halves((x0, y0, w, h): Rect) -> (Rect, Rect) {
+    if w >= h {
+        let w1 = w / 2;
+        ((x0, y0, w1, h), (x0 + w1, y0, w - w1, h))
+    } else {
+        let h1 = h / 2;
+        ((x0, y0, w, h1), (x0, y0 + h1, w, h - h1))
+    }
+}
+
+/// The rectangle's first valid cell (index below `n`) in row-major order, if any.
+pub fn first_valid((x0, y0, _, h): Rect, width: usize, n: usize) -> Option<usize> {
+    (y0..y0 + h).map(|y| y * width + x0).find(|&c| c < n)
+}
+
 /// Below this many points a rectangle is split on the calling thread.
 const PARALLEL_MIN: usize = 16_384;
 
@@ -55,29 +74,18 @@ impl Layout<'_> {
     /// Place `idx` (exactly the rectangle's valid cells in number) into `cells`, the grid
     /// from the rectangle's first row on (`cells[0]` is cell `y0 × width`), so that a
     /// rectangle split into a top and a bottom half hands each half its own rows.
-    fn place(&self, idx: &mut [u32], rect: (usize, usize, usize, usize), cells: &mut [u32]) {
-        let (x0, y0, w, h) = rect;
+    fn place(&self, idx: &mut [u32], rect: Rect, cells: &mut [u32]) {
+        let (_, y0, w, h) = rect;
         if idx.is_empty() {
             return;
         }
         if idx.len() == 1 || w * h == 1 {
-            // The rectangle's first valid cell in row-major order.
-            for y in y0..y0 + h {
-                let row = y * self.width;
-                if row + x0 < self.n {
-                    cells[row + x0 - y0 * self.width] = idx[0];
-                    return;
-                }
+            if let Some(c) = first_valid(rect, self.width, self.n) {
+                cells[c - y0 * self.width] = idx[0];
             }
             return;
         }
-        let (ra, rb) = if w >= h {
-            let w1 = w / 2;
-            ((x0, y0, w1, h), (x0 + w1, y0, w - w1, h))
-        } else {
-            let h1 = h / 2;
-            ((x0, y0, w, h1), (x0, y0 + h1, w, h - h1))
-        };
+        let (ra, rb) = halves(rect);
         let na = valid_in(ra.0, ra.1, ra.2, ra.3, self.width, self.n).min(idx.len());
         let axis = self.axis(idx);
         if na > 0 && na < idx.len() {
