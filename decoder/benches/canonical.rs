@@ -1,5 +1,6 @@
 //! Canonical-state decoding on real data: the `CSOG` payload of the real plant scene (113,648
-//! Gaussians) at `high`, and a GENERATED binary voxel residual field (`RNTC`, the reference's
+//! Gaussians) at `high`, with grid positions (layout 0) and octree positions (layout 2, the
+//! default since format 1.10), and a GENERATED binary voxel residual field (`RNTC`, the reference's
 //! shapes; no trained DLGStream model exists here) applied to that scene, 1 and 2 threads.
 //! `cargo bench -p dlgs-decoder --bench canonical`
 
@@ -18,6 +19,18 @@ fn bench(c: &mut Criterion) {
     let sorted = permute(&g, &grid_order(&g, SortSpec::DEFAULT));
     let canon = Canonical::from_static(sorted);
     let payload = sorted_grid::encode(&canon, &QuantBits::HIGH, 9).unwrap();
+    let part = [(g.clone(), QuantBits::HIGH)];
+    let octree = sorted_grid::encode_octree(
+        &sorted_grid::PartedGop {
+            static_parts: &part,
+            static_weight: None,
+            dynamics: &canon.dynamics,
+            dynamic_bits: &QuantBits::HIGH,
+        },
+        9,
+    )
+    .unwrap()
+    .0;
     let scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     let field = synth_ntc(
         &canon,
@@ -35,6 +48,12 @@ fn bench(c: &mut Criterion) {
         group.bench_function(format!("csog_high_decode/{threads}t"), |b| {
             b.iter(|| {
                 pool.install(|| sorted_grid::decode(&payload, 0, &scene, &Limits::default()))
+                    .unwrap()
+            })
+        });
+        group.bench_function(format!("csog_high_octree_decode/{threads}t"), |b| {
+            b.iter(|| {
+                pool.install(|| sorted_grid::decode(&octree, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });

@@ -111,6 +111,39 @@ pub(crate) trait BitCoder {
         let mut fresh = Adaptive::NEW;
         self.code(&mut fresh, bit)
     }
+    /// The `k <= 16` low bits of `value` as one symbol, each of the `2^k` equally likely
+    /// (nothing for `k = 0`): what `k` raw bits carry, in one coder step.
+    fn uniform(&mut self, value: u32, k: u8) -> Result<u32>;
+}
+
+/// `2^k` equally likely values at the binary models' precision: value `v` takes
+/// `[v 2^(16-k), (v + 1) 2^(16-k))` of the range.
+struct Uniform {
+    k: u8,
+}
+
+impl EntropyModel<PRECISION> for Uniform {
+    type Symbol = u32;
+    type Probability = u32;
+}
+
+impl EncoderModel<PRECISION> for Uniform {
+    fn left_cumulative_and_probability(
+        &self,
+        symbol: impl Borrow<u32>,
+    ) -> Option<(u32, NonZeroU32)> {
+        let v = *symbol.borrow();
+        let shift = PRECISION as u32 - self.k as u32;
+        (v >> self.k == 0).then(|| (v << shift, NonZeroU32::new(1 << shift).expect("k <= 16")))
+    }
+}
+
+impl DecoderModel<PRECISION> for Uniform {
+    fn quantile_function(&self, quantile: u32) -> (u32, u32, NonZeroU32) {
+        let shift = PRECISION as u32 - self.k as u32;
+        let v = quantile >> shift;
+        (v, v << shift, NonZeroU32::new(1 << shift).expect("k <= 16"))
+    }
 }
 
 pub(crate) struct Encoder(pub(crate) DefaultRangeEncoder);
@@ -122,6 +155,17 @@ impl BitCoder for Encoder {
             .expect("a bool is inside a binary model");
         m.update(bit);
         Ok(bit)
+    }
+
+    fn uniform(&mut self, value: u32, k: u8) -> Result<u32> {
+        assert!(k <= PRECISION as u8, "at most 16 bits in one symbol");
+        if k > 0 {
+            let v = value & ((1u32 << k) - 1);
+            self.0
+                .encode_symbol(v, Uniform { k })
+                .expect("the value fits its bits");
+        }
+        Ok(value & ((1u32 << k) - 1))
     }
 }
 
@@ -138,6 +182,16 @@ impl BitCoder for Decoder<'_> {
             .map_err(|_| bad(self.r, "range coder stream ended early".into()))?;
         m.update(bit);
         Ok(bit)
+    }
+
+    fn uniform(&mut self, _: u32, k: u8) -> Result<u32> {
+        if k == 0 {
+            return Ok(0);
+        }
+        let k = k.min(PRECISION as u8);
+        self.dec
+            .decode_symbol(Uniform { k })
+            .map_err(|_| bad(self.r, "range coder stream ended early".into()))
     }
 }
 

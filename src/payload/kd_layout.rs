@@ -41,21 +41,22 @@ pub fn first_valid((x0, y0, _, h): Rect, width: usize, n: usize) -> Option<usize
 /// Below this many points a rectangle is split on the calling thread.
 const PARALLEL_MIN: usize = 16_384;
 
-struct Layout<'a> {
-    points: &'a [[u16; 3]],
+/// A point and its index, kept together so the splits read memory in order.
+type Entry = ([u16; 3], u32);
+
+struct Layout {
     /// Scene units per quantisation step, per axis.
     step: [f64; 3],
     width: usize,
     n: usize,
 }
 
-impl Layout<'_> {
+impl Layout {
     /// The axis of largest `(max - min) × step` over `idx` (ties: the lowest axis).
-    fn axis(&self, idx: &[u32]) -> usize {
+    fn axis(&self, idx: &[Entry]) -> usize {
         let mut lo = [u16::MAX; 3];
         let mut hi = [0u16; 3];
-        for &i in idx {
-            let p = self.points[i as usize];
+        for &(p, _) in idx {
             for a in 0..3 {
                 lo[a] = lo[a].min(p[a]);
                 hi[a] = hi[a].max(p[a]);
@@ -71,17 +72,17 @@ impl Layout<'_> {
         best
     }
 
-    /// Place `idx` (exactly the rectangle's valid cells in number) into `cells`, the grid
-    /// from the rectangle's first row on (`cells[0]` is cell `y0 × width`), so that a
-    /// rectangle split into a top and a bottom half hands each half its own rows.
-    fn place(&self, idx: &mut [u32], rect: Rect, cells: &mut [u32]) {
-        let (_, y0, w, h) = rect;
+    /// Place `idx` (exactly the rectangle's valid cells in number): `cell[k]` becomes the
+    /// grid cell of point `idx[k]`. Both slices split at the same point with the points, so
+    /// every split may run in parallel.
+    fn place(&self, idx: &mut [Entry], rect: Rect, cell: &mut [u32]) {
+        let (_, _, w, h) = rect;
         if idx.is_empty() {
             return;
         }
         if idx.len() == 1 || w * h == 1 {
             if let Some(c) = first_valid(rect, self.width, self.n) {
-                cells[c - y0 * self.width] = idx[0];
+                cell[0] = c as u32;
             }
             return;
         }
@@ -91,22 +92,15 @@ impl Layout<'_> {
         if na > 0 && na < idx.len() {
             // Points are ordered by the coordinate, then by index: a total order, so the split
             // is the same whatever the selection algorithm.
-            let pts = self.points;
-            idx.select_nth_unstable_by_key(na, |&i| (pts[i as usize][axis], i));
+            idx.select_nth_unstable_by_key(na, |&(p, i)| (p[axis], i));
         }
         let (a, b) = idx.split_at_mut(na);
-        if w >= h {
-            // Side by side: both halves write the same rows; split the work, not the cells.
-            self.place(a, ra, cells);
-            self.place(b, rb, cells);
+        let (ca, cb) = cell.split_at_mut(na);
+        if a.len() + b.len() >= PARALLEL_MIN {
+            rayon::join(|| self.place(a, ra, ca), || self.place(b, rb, cb));
         } else {
-            let (top, bottom) = cells.split_at_mut(((rb.1 - y0) * self.width).min(cells.len()));
-            if a.len() + b.len() >= PARALLEL_MIN {
-                rayon::join(|| self.place(a, ra, top), || self.place(b, rb, bottom));
-            } else {
-                self.place(a, ra, top);
-                self.place(b, rb, bottom);
-            }
+            self.place(a, ra, ca);
+            self.place(b, rb, cb);
         }
     }
 }
@@ -121,17 +115,15 @@ pub fn kd_layout(points: &[[u16; 3]], step: [f64; 3]) -> Vec<u32> {
     }
     let width = grid_width(n);
     let height = n.div_ceil(width);
-    let layout = Layout {
-        points,
-        step,
-        width,
-        n,
-    };
-    let mut idx: Vec<u32> = (0..n as u32).collect();
-    let mut cells = vec![0u32; height * width];
-    layout.place(&mut idx, (0, 0, width, height), &mut cells);
-    cells.truncate(n);
-    cells
+    let layout = Layout { step, width, n };
+    let mut idx: Vec<Entry> = points.iter().zip(0..).map(|(&p, i)| (p, i)).collect();
+    let mut cell = vec![0u32; n];
+    layout.place(&mut idx, (0, 0, width, height), &mut cell);
+    let mut grid = vec![0u32; n];
+    for (&(_, i), &c) in idx.iter().zip(&cell) {
+        grid[c as usize] = i;
+    }
+    grid
 }
 
 #[cfg(test)]

@@ -7,7 +7,8 @@
 //! The tree is walked depth first, children in order `j = 4 x + 2 y + z` of their bits at the
 //! level, so points come out in Morton order. A node holding two or more points codes which of
 //! its 8 children are occupied, then for each occupied child whether it holds exactly one
-//! point; a lone point's remaining bits are raw (they are close to uniform), and a voxel of the
+//! point; a lone point's remaining bits are one uniform symbol per axis (they are close to
+//! uniform), and a voxel of the
 //! last level that holds several points codes how many.
 
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
@@ -71,17 +72,13 @@ fn digit(p: [u16; 3], bits: u8, level: usize) -> usize {
     ((p[0] >> s & 1) << 2 | (p[1] >> s & 1) << 1 | (p[2] >> s & 1)) as usize
 }
 
-/// Code the `bits - level` low bits of each axis of a lone point, x then y then z, most
-/// significant first.
+/// Code the `bits - level` low bits of each axis of a lone point, x then y then z, each axis
+/// as one uniform symbol (they are close to uniform; one coder step instead of one per bit).
 fn code_lone<C: BitCoder>(c: &mut C, p: &mut [u16; 3], bits: u8, level: usize) -> Result<()> {
+    let k = bits - level as u8;
     for v in p.iter_mut() {
-        for s in (0..bits as usize - level).rev() {
-            if c.raw(*v >> s & 1 == 1)? {
-                *v |= 1 << s;
-            } else {
-                *v &= !(1 << s);
-            }
-        }
+        let low = c.uniform(*v as u32, k)?;
+        *v = ((*v as u32 >> k << k) | low) as u16;
     }
     Ok(())
 }

@@ -421,9 +421,11 @@ fn code_set(
                     data: Vec::new(),
                 };
             }
-            // Codecs 4 and 5 may code against the previous channel.
+            // Codecs 4 and 5 may code against the previous channel; not against octree
+            // positions, so that readers decode the octree beside the other channels.
             let prev = j
                 .checked_sub(1)
+                .filter(|&p| p >= first)
                 .map(|p| (chans[p].3.as_slice(), chans[p].0));
             let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
             Channel {
@@ -764,16 +766,16 @@ fn decode_set(
     // An octree set's positions come first, already in grid order (§6.5.5).
     type Stored<'a> = (Kind, u8, GridCodec, f32, f32, &'a [u8], u64);
     let mut stored: Vec<Stored> = Vec::with_capacity(kinds.len());
-    let mut positions: Vec<Vec<u16>> = Vec::new();
-    if octree {
-        let (bits, ranges, cells) = decode_octree_positions(r, n)?;
-        for (a, cells) in cells.into_iter().enumerate() {
-            let (min, max) = ranges[a];
-            stored.push((kinds[a], bits, GridCodec::Constant, min, max, &[], 0));
-            positions.push(cells);
+    let tree = if octree {
+        let t = read_octree_record(r)?;
+        for (a, &(min, max)) in t.ranges.iter().enumerate() {
+            stored.push((kinds[a], t.bits, GridCodec::Constant, min, max, &[], 0));
         }
-    }
-    let first = positions.len();
+        Some(t)
+    } else {
+        None
+    };
+    let first = stored.len();
     for &k in &kinds[first..] {
         let at = r.offset();
         let bits = r.u8("CSOG channel bits")?;
@@ -784,8 +786,9 @@ fn decode_set(
         let at = r.offset();
         let codec = GridCodec::from_u8(r.u8("CSOG channel codec")?)
             .ok_or_else(|| bad_at("unknown grid codec".into(), at))?;
-        if codec == GridCodec::HistogramDelta && stored.last().is_none_or(|p: &Stored| p.1 != bits)
-        {
+        // The records after octree positions start without a previous channel.
+        let prev_bits = stored.last().filter(|_| stored.len() > first).map(|p| p.1);
+        if codec == GridCodec::HistogramDelta && prev_bits != Some(bits) {
             return Err(bad_at(
                 format!("{k:?}: codec 4 needs a previous channel with the same {bits} bits"),
                 at,
@@ -809,8 +812,8 @@ fn decode_set(
     }
     // Codec 4 and codec 5 modes 1-3 need the previous channel's final cells:
     // split the records into chains that start at an independent channel, decode the chains in
-    // parallel and each chain in order (same cells whatever the thread count). A chain that
-    // starts right after octree positions continues from their last channel.
+    // parallel and each chain in order (same cells whatever the thread count). The first
+    // record after octree positions starts a chain: it has no previous channel (§6.5.2).
     let needs_previous = |s: &Stored| match s.2 {
         GridCodec::HistogramDelta => true,
         GridCodec::Adaptive => {
@@ -827,33 +830,57 @@ fn decode_set(
             _ => chains.push(j..j + 1),
         }
     }
-    let decoded_chains: Vec<Vec<Vec<u16>>> = chains
-        .par_iter()
-        .map(|range| {
-            let mut out: Vec<Vec<u16>> = Vec::with_capacity(range.len());
-            for j in range.clone() {
-                let (_, bits, codec, _, _, data, at) = stored[j];
-                let prev = match out.last() {
-                    Some(p) => Some((p.as_slice(), stored[j - 1].1)),
-                    None if j > 0 && j == first => {
-                        Some((positions[j - 1].as_slice(), stored[j - 1].1))
-                    }
-                    None => None,
-                };
-                let mut q =
-                    grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits, prev)?;
-                if codec == GridCodec::HistogramDelta {
-                    let (p, _) = prev.expect("codec 4 continues a chain (checked above)");
-                    grid_coder::undo_delta(&mut q, p, bits);
-                }
-                out.push(q);
+    let decode_chain = |range: &std::ops::Range<usize>| {
+        let mut out: Vec<Vec<u16>> = Vec::with_capacity(range.len());
+        for j in range.clone() {
+            let (_, bits, codec, _, _, data, at) = stored[j];
+            let prev = out.last().map(|p| (p.as_slice(), stored[j - 1].1));
+            let mut q =
+                grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits, prev)?;
+            if codec == GridCodec::HistogramDelta {
+                let (p, _) = prev.expect("codec 4 continues a chain (checked above)");
+                grid_coder::undo_delta(&mut q, p, bits);
             }
-            Ok(out)
+            out.push(q);
+        }
+        Ok::<_, Error>(out)
+    };
+    // Octree positions decode beside the chains (no record codes against them). The costliest
+    // work starts first, so that no long chain is left to run alone at the end: the octree and
+    // its layout, then the chains by their coded bytes.
+    let chain_bytes =
+        |c: &std::ops::Range<usize>| stored[c.clone()].iter().map(|s| s.5.len()).sum::<usize>();
+    let mut tasks: Vec<Option<usize>> = (0..chains.len()).map(Some).collect();
+    tasks.sort_by_key(|t| std::cmp::Reverse(t.map(|c| chain_bytes(&chains[c]))));
+    let mut tree = tree;
+    if tree.is_some() {
+        tasks.insert(0, None);
+    }
+    let tree = std::sync::Mutex::new(tree.take());
+    let done: Vec<(Option<usize>, Vec<Vec<u16>>)> = tasks
+        .into_par_iter()
+        .with_max_len(1)
+        .map(|t| match t {
+            Some(c) => Ok((t, decode_chain(&chains[c])?)),
+            None => {
+                let record = tree.lock().expect("one task takes the octree").take();
+                let cells = record.map(|r| octree_cells(r, n)).transpose()?;
+                Ok((t, cells.map(Vec::from).unwrap_or_default()))
+            }
         })
         .collect::<Result<_>>()?;
+    // Back to record order: positions, then the chains in order.
+    let mut by_chain: Vec<Option<Vec<Vec<u16>>>> = vec![None; chains.len()];
+    let mut positions = Vec::new();
+    for (t, cells) in done {
+        match t {
+            Some(c) => by_chain[c] = Some(cells),
+            None => positions = cells,
+        }
+    }
     let cells: Vec<Vec<u16>> = positions
         .into_iter()
-        .chain(decoded_chains.into_iter().flatten())
+        .chain(by_chain.into_iter().flatten().flatten())
         .collect();
     let decoded: Vec<(u8, Vec<f32>)> = stored
         .par_iter()
@@ -913,13 +940,15 @@ fn decode_set(
     Ok(g)
 }
 
-/// An octree set's position record (§6.5.5): bits, three ranges and the octree, decoded and
-/// laid out in grid order. Returns the bits, the ranges and the three position channels' cells.
-#[allow(clippy::type_complexity)]
-fn decode_octree_positions(
-    r: &mut ByteReader,
-    n: usize,
-) -> Result<(u8, [(f32, f32); 3], [Vec<u16>; 3])> {
+/// An octree set's position record (§6.5.5), read but not yet decoded.
+struct OctreeRecord<'a> {
+    bits: u8,
+    ranges: [(f32, f32); 3],
+    data: &'a [u8],
+    at: u64,
+}
+
+fn read_octree_record<'a>(r: &mut ByteReader<'a>) -> Result<OctreeRecord<'a>> {
     let at = r.offset();
     let bits = r.u8("CSOG octree bits")?;
     if !(1..=octree_positions::MAX_BITS).contains(&bits) {
@@ -935,11 +964,23 @@ fn decode_octree_positions(
     let len = r.u32("CSOG octree length")? as usize;
     let at = r.offset();
     let data = r.take(len, "CSOG octree data")?;
-    let points = octree_positions::decode(ByteReader::new(data, at), n, bits)?;
-    let step = ranges.map(|(min, max)| (max as f64 - min as f64).max(0.0) / levels(bits) as f64);
+    Ok(OctreeRecord {
+        bits,
+        ranges,
+        data,
+        at,
+    })
+}
+
+/// The octree's `n` points laid out in grid order: the three position channels' cells.
+fn octree_cells(t: OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
+    let points = octree_positions::decode(ByteReader::new(t.data, t.at), n, t.bits)?;
+    let step = t
+        .ranges
+        .map(|(min, max)| (max as f64 - min as f64).max(0.0) / levels(t.bits) as f64);
     let order = kd_layout::kd_layout(&points, step);
     let axis = |a: usize| order.iter().map(|&i| points[i as usize][a]).collect();
-    Ok((bits, ranges, [axis(0), axis(1), axis(2)]))
+    Ok([axis(0), axis(1), axis(2)])
 }
 
 /// A set stored as parts (layout 1): a part count, then per part its Gaussian count and its
