@@ -47,7 +47,8 @@ pub struct CodecArgs {
     /// Store the static Gaussians' positions as grid channels, in the grid sort's order
     /// (layouts 0 and 1), as files before format 1.10. By default they are an octree and the
     /// Gaussians are stored in an order every reader derives from the positions (layout 2,
-    /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes
+    /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file), for
+    /// 16-50 ms more decode time on 273k Gaussians (BENCHMARKS.md "Decode time")
     #[arg(long)]
     pub grid_positions: bool,
     /// Keep the Gaussians no renderer draws. By default a lossy (`--quality` other than

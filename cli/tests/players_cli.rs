@@ -256,3 +256,36 @@ fn encode_with_tiers_and_seek_with_a_gop_cache() {
     let seek = dlgs(&["seek", &m, "--count", "4", "--gop-cache", "3"]);
     assert!(seek.contains("GOP cache 3"), "{seek}");
 }
+
+#[test]
+fn encode_octree_positions_by_default_and_grid_positions_on_request() {
+    // Format 1.10: the default codes static positions as an octree (CSOG layout 2);
+    // `--grid-positions` keeps them in the grid (layout 0). Same quantised values, so both
+    // render alike; the octree file is smaller on this real scene.
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data(SCENE);
+    let scene = scene.to_str().unwrap();
+    let path = |n: &str| tmp.path().join(n).to_str().unwrap().to_owned();
+    let (octree, grid) = (path("octree.dlgs"), path("grid.dlgs"));
+    dlgs(&["encode", scene, "-o", &octree, "--quality", "medium"]);
+    let g = ["encode", scene, "-o", &grid, "--quality", "medium"];
+    dlgs(&[&g[..], &["--grid-positions"]].concat());
+    let size = |p: &str| std::fs::metadata(p).unwrap().len();
+    assert!(
+        size(&octree) < size(&grid),
+        "{} vs {}",
+        size(&octree),
+        size(&grid)
+    );
+    let psnr = |p: &str| -> f64 {
+        let cmp = dlgs(&["compare", scene, p, "--json", "--orbit", "2"]);
+        serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+            .as_f64()
+            .unwrap()
+    };
+    let (a, b) = (psnr(&octree), psnr(&grid));
+    assert!((a - b).abs() < 0.05 && a > 45.0, "{a} vs {b} dB");
+    let err = dlgs_fails(&[&g[..], &["--sort-passes", "2"]].concat());
+    assert!(err.contains("--grid-positions"), "{err}");
+    dlgs(&[&g[..], &["--grid-positions", "--sort-passes", "2"]].concat());
+}
