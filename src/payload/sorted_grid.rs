@@ -852,19 +852,16 @@ fn decode_set(
         |c: &std::ops::Range<usize>| stored[c.clone()].iter().map(|s| s.5.len()).sum::<usize>();
     let mut tasks: Vec<Option<usize>> = (0..chains.len()).map(Some).collect();
     tasks.sort_by_key(|t| std::cmp::Reverse(t.map(|c| chain_bytes(&chains[c]))));
-    let mut tree = tree;
     if tree.is_some() {
         tasks.insert(0, None);
     }
-    let tree = std::sync::Mutex::new(tree.take());
     let done: Vec<(Option<usize>, Vec<Vec<u16>>)> = tasks
         .into_par_iter()
         .with_max_len(1)
         .map(|t| match t {
             Some(c) => Ok((t, decode_chain(&chains[c])?)),
             None => {
-                let record = tree.lock().expect("one task takes the octree").take();
-                let cells = record.map(|r| octree_cells(r, n)).transpose()?;
+                let cells = tree.as_ref().map(|r| octree_cells(r, n)).transpose()?;
                 Ok((t, cells.map(Vec::from).unwrap_or_default()))
             }
         })
@@ -973,7 +970,7 @@ fn read_octree_record<'a>(r: &mut ByteReader<'a>) -> Result<OctreeRecord<'a>> {
 }
 
 /// The octree's `n` points laid out in grid order: the three position channels' cells.
-fn octree_cells(t: OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
+fn octree_cells(t: &OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
     let points = octree_positions::decode(ByteReader::new(t.data, t.at), n, t.bits)?;
     let step = t
         .ranges
