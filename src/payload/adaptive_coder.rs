@@ -195,6 +195,19 @@ impl BitCoder for Decoder<'_> {
     }
 }
 
+/// The range decoder of a stream that fills the rest of `r`: a word count, the words, and
+/// nothing after them (`what` names the stream in errors).
+pub(crate) fn open_stream(r: &mut ByteReader, what: &str) -> Result<DefaultRangeDecoder> {
+    let words = read_words(r)?;
+    if r.remaining() != 0 {
+        return Err(bad(
+            r,
+            format!("{} bytes after the {what} stream", r.remaining()),
+        ));
+    }
+    DefaultRangeDecoder::from_compressed(words).map_err(|_| bad(r, "range coder stream".into()))
+}
+
 /// Coding mode of a codec-5 channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
@@ -433,15 +446,7 @@ pub fn decode(
     if let Some(why) = mode.unusable(bits, prev) {
         return Err(bad(&r, format!("adaptive mode {mode:?}: {why}")));
     }
-    let words = read_words(&mut r)?;
-    if r.remaining() != 0 {
-        return Err(bad(
-            &r,
-            format!("{} bytes after the adaptive stream", r.remaining()),
-        ));
-    }
-    let dec = DefaultRangeDecoder::from_compressed(words)
-        .map_err(|_| bad(&r, "range coder stream".into()))?;
+    let dec = open_stream(&mut r, "adaptive")?;
     let mut q = vec![0u16; n];
     let mut coder = Decoder { dec, r: &r };
     code_cells(&mut coder, &mut q, width, bits, mode, prev)?;

@@ -11,10 +11,10 @@
 //! uniform), and a voxel of the
 //! last level that holds several points codes how many.
 
-use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
+use constriction::stream::queue::DefaultRangeEncoder;
 
-use super::adaptive_coder::{Adaptive, BitCoder, Decoder, Encoder};
-use super::grid_coder::{bad, read_words};
+use super::adaptive_coder::{open_stream, Adaptive, BitCoder, Decoder, Encoder};
+use super::grid_coder::bad;
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::Result;
 
@@ -185,15 +185,7 @@ pub fn decode(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<[u16; 3]>> {
     if !(1..=MAX_BITS).contains(&bits) {
         return Err(bad(&r, format!("octree of {bits} bits per axis (1..=16)")));
     }
-    let words = read_words(&mut r)?;
-    if r.remaining() != 0 {
-        return Err(bad(
-            &r,
-            format!("{} bytes after the octree stream", r.remaining()),
-        ));
-    }
-    let dec = DefaultRangeDecoder::from_compressed(words)
-        .map_err(|_| bad(&r, "range coder stream".into()))?;
+    let dec = open_stream(&mut r, "octree")?;
     let mut c = Decoder { dec, r: &r };
     let mut m = Models::new();
     let mut out = Vec::with_capacity(n);
