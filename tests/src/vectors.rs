@@ -84,19 +84,19 @@ pub fn all() -> Vec<Vector> {
     ];
     v.push(Vector {
         name: "lod3-csog-medium",
-        bytes: csog_still(&lod3),
+        bytes: csog(&lod3, Vec::new(), false),
         error: None,
         about: "the lod3 scene as sorted quantised grids (CSOG layout 0, grid positions, preset medium, default sort)",
     });
     v.push(Vector {
         name: "lod3-csog-tiered",
-        bytes: csog_tiered(&lod3),
+        bytes: csog(&lod3, vec![0.1, 0.02], false),
         error: None,
         about: "the lod3 scene as CSOG layout 1 (since 1.8, grid positions): preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser and those holding 2 % two bits coarser, three parts",
     });
     v.push(Vector {
         name: "lod3-csog-octree",
-        bytes: csog_octree(&lod3),
+        bytes: csog(&lod3, vec![0.1], true),
         error: None,
         about: "the lod3 scene as CSOG layout 2 (since 1.10): octree positions, the order derived from them; preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser, two parts",
     });
@@ -460,41 +460,17 @@ pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
     out
 }
 
-fn csog_tiered(g: &dlgs::Gaussians) -> Vec<u8> {
+/// The lod3 scene as a still `CSOG` at preset medium with these importance tiers, with octree
+/// positions (layout 2) or grid positions (layouts 0 and 1).
+fn csog(g: &dlgs::Gaussians, tier_weights: Vec<f64>, octree_positions: bool) -> Vec<u8> {
     use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
     let cfg = EncoderConfig {
         canonical: CanonicalCodec::Sorted {
             bits: dlgs::payload::sorted_grid::QuantBits::MEDIUM,
             sort: SortSpec::DEFAULT,
         },
-        tier_weights: vec![0.1, 0.02],
-        octree_positions: false,
-        ..Default::default()
-    };
-    dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()
-}
-
-fn csog_octree(g: &dlgs::Gaussians) -> Vec<u8> {
-    use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
-    let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: dlgs::payload::sorted_grid::QuantBits::MEDIUM,
-            sort: SortSpec::DEFAULT,
-        },
-        tier_weights: vec![0.1],
-        ..Default::default()
-    };
-    dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()
-}
-
-fn csog_still(g: &dlgs::Gaussians) -> Vec<u8> {
-    use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
-    let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: dlgs::payload::sorted_grid::QuantBits::MEDIUM,
-            sort: SortSpec::DEFAULT,
-        },
-        octree_positions: false,
+        tier_weights,
+        octree_positions,
         ..Default::default()
     };
     dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()
