@@ -9,7 +9,7 @@ use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs::payload::mlp_weights::WeightType;
 use dlgs::payload::raw_canonical::RawCodec;
-use dlgs::payload::sorted_grid::QuantBits;
+use dlgs::payload::sorted_grid::{QuantBits, RotationCoarsening};
 use dlgs_decoder::Decoder;
 use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
 use dlgs_encoder::{
@@ -46,11 +46,19 @@ pub struct CodecArgs {
     pub keep_orientation: bool,
     /// Store the static Gaussians' positions as grid channels, in the grid sort's order
     /// (layouts 0 and 1), as files before format 1.10. By default they are an octree and the
-    /// Gaussians are stored in an order every reader derives from the positions (layout 2,
+    /// Gaussians are stored in an order every reader derives from the positions (layouts 2-3,
     /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file), for
     /// 16-50 ms more decode time on 273k Gaussians (BENCHMARKS.md "Decode time")
     #[arg(long)]
     pub grid_positions: bool,
+    /// Octree positions: store the rotation of each Gaussian too small for one rotation step
+    /// to move its surface by FACTOR position steps up to 4 bits coarser, one bit per halving
+    /// of its largest scale (layout 3, format-spec §6.5.6). 0 = every rotation at the preset's
+    /// bits (layout 2, as files of format 1.10). The default, 1, makes SH 0 scenes and gsplat
+    /// 1-4 % smaller for 0.00-0.33 dB (BENCHMARKS.md "Coarse rotations"); 2 saves about twice
+    /// as much for up to 1.7 dB. [default: 1, or 0 with --grid-positions]
+    #[arg(long, value_name = "FACTOR")]
+    pub coarse_rotations: Option<f32>,
     /// Keep the Gaussians no renderer draws. By default a lossy (`--quality` other than
     /// `lossless`) still scene leaves out every Gaussian whose opacities are below 1/255: they
     /// never reach the 1/255 alpha at which 3DGS compositing starts, so no pixel changes.
@@ -251,6 +259,14 @@ impl CodecArgs {
         if self.tiered() && self.shape > 0.0 {
             bail!("--tiers and --shape cannot be combined");
         }
+        if let Some(f) = self.coarse_rotations {
+            if !(f.is_finite() && f >= 0.0) {
+                bail!("--coarse-rotations takes a factor >= 0, got {f}");
+            }
+            if f > 0.0 && self.grid_positions {
+                bail!("--coarse-rotations needs octree positions: drop --grid-positions");
+            }
+        }
         if self.sort_passes > 0 && !self.grid_positions {
             bail!(
                 "--sort-passes orders grid positions: give --grid-positions too (octree \
@@ -295,6 +311,15 @@ impl CodecArgs {
             shape_tolerance: self.shape,
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
             octree_positions: !self.grid_positions,
+            rotation_coarsening: match self.coarse_rotations {
+                None if self.grid_positions => None,
+                None => Some(RotationCoarsening::DEFAULT),
+                Some(f) if f > 0.0 => Some(RotationCoarsening {
+                    factor: f,
+                    ..RotationCoarsening::DEFAULT
+                }),
+                Some(_) => None,
+            },
         })
     }
 

@@ -288,4 +288,23 @@ fn encode_octree_positions_by_default_and_grid_positions_on_request() {
     let err = dlgs_fails(&[&g[..], &["--sort-passes", "2"]].concat());
     assert!(err.contains("--grid-positions"), "{err}");
     dlgs(&[&g[..], &["--grid-positions", "--sort-passes", "2"]].concat());
+    // Format 1.11: octree files are layout 3 with coarse rotations at factor 1 by default;
+    // at factor 8 most of this scene's Gaussians turn coarser, so the file shrinks and the
+    // image moves a little. Factor 0 writes layout 2.
+    let coarse = path("coarse.dlgs");
+    let c = ["encode", scene, "-o", &coarse, "--quality", "medium"];
+    dlgs(&[&c[..], &["--coarse-rotations", "8"]].concat());
+    assert!(
+        size(&coarse) < size(&octree),
+        "{} vs {}",
+        size(&coarse),
+        size(&octree)
+    );
+    let p = psnr(&coarse);
+    assert!(p < a && p > a - 6.0, "{p} vs {a} dB");
+    dlgs(&[&c[..], &["--coarse-rotations", "0"]].concat());
+    let err = dlgs_fails(&[&g[..], &["--grid-positions", "--coarse-rotations", "1"]].concat());
+    assert!(err.contains("octree positions"), "{err}");
+    let err = dlgs_fails(&[&c[..], &["--coarse-rotations=-1"]].concat());
+    assert!(err.contains("factor >= 0"), "{err}");
 }

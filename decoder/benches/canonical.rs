@@ -1,6 +1,6 @@
 //! Canonical-state decoding on real data: the `CSOG` payload of the real plant scene (113,648
-//! Gaussians) at `high`, with grid positions (layout 0) and octree positions (layout 2, the
-//! default since format 1.10), and a GENERATED binary voxel residual field (`RNTC`, the reference's
+//! Gaussians) at `high`, with grid positions (layout 0), octree positions (layout 2, since
+//! format 1.10) and octree positions with coarse rotations (layout 3, the default since 1.11), and a GENERATED binary voxel residual field (`RNTC`, the reference's
 //! shapes; no trained DLGStream model exists here) applied to that scene, 1 and 2 threads.
 //! `cargo bench -p dlgs-decoder --bench canonical`
 
@@ -8,7 +8,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use dlgs::container::SceneHeader;
 use dlgs::model::ntc::NtcConfig;
 use dlgs::model::Canonical;
-use dlgs::payload::sorted_grid::{self, QuantBits};
+use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::Limits;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::synth::synth_ntc;
@@ -20,17 +20,18 @@ fn bench(c: &mut Criterion) {
     let canon = Canonical::from_static(sorted);
     let payload = sorted_grid::encode(&canon, &QuantBits::HIGH, 9).unwrap();
     let part = [(g.clone(), QuantBits::HIGH)];
-    let octree = sorted_grid::encode_octree(
-        &sorted_grid::PartedGop {
+    let octree_payload = |rotation_coarsening| {
+        let gop = sorted_grid::PartedGop {
             static_parts: &part,
             static_weight: None,
             dynamics: &canon.dynamics,
             dynamic_bits: &QuantBits::HIGH,
-        },
-        9,
-    )
-    .unwrap()
-    .0;
+            rotation_coarsening,
+        };
+        sorted_grid::encode_octree(&gop, 9).unwrap().0
+    };
+    let octree = octree_payload(None);
+    let coarse = octree_payload(Some(RotationCoarsening::DEFAULT));
     let scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     let field = synth_ntc(
         &canon,
@@ -54,6 +55,12 @@ fn bench(c: &mut Criterion) {
         group.bench_function(format!("csog_high_octree_decode/{threads}t"), |b| {
             b.iter(|| {
                 pool.install(|| sorted_grid::decode(&octree, 0, &scene, &Limits::default()))
+                    .unwrap()
+            })
+        });
+        group.bench_function(format!("csog_high_coarse_decode/{threads}t"), |b| {
+            b.iter(|| {
+                pool.install(|| sorted_grid::decode(&coarse, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });

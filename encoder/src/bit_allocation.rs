@@ -14,7 +14,7 @@
 //! the sizes are the payload's.
 
 use dlgs::model::{Canonical, Gaussians};
-use dlgs::payload::sorted_grid::{self, QuantBits};
+use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::{Limits, Result};
 use dlgs_render::{metrics, orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
 
@@ -75,8 +75,10 @@ struct Judge {
     cams: Vec<Camera>,
     reference: Vec<f32>,
     zstd_level: i32,
-    /// Code as the encoder will: octree positions (layout 2) or grid positions (layout 0).
+    /// Code as the encoder will: octree positions (layout 2, or 3 with rotation coarsening)
+    /// or grid positions (layout 0).
     octree: bool,
+    coarsening: Option<RotationCoarsening>,
 }
 
 /// All views of `g`, one after the other.
@@ -104,6 +106,7 @@ impl Judge {
                 static_weight: None,
                 dynamics: &self.canon.dynamics,
                 dynamic_bits: bits,
+                rotation_coarsening: self.coarsening,
             };
             sorted_grid::encode_octree(&gop, self.zstd_level)?.0
         } else {
@@ -124,6 +127,7 @@ pub fn reallocate(
     zstd_level: i32,
     max_moves: usize,
     octree: bool,
+    coarsening: Option<RotationCoarsening>,
     mut progress: impl FnMut(&Move),
 ) -> Result<Allocation> {
     let spec = OrbitSpec {
@@ -141,6 +145,7 @@ pub fn reallocate(
         cams,
         zstd_level,
         octree,
+        coarsening,
     };
     let groups: Vec<&'static str> = GROUPS
         .into_iter()

@@ -23,7 +23,7 @@ use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
 use dlgs::model::DynamicGop;
 use dlgs::payload::mlp_weights::{self, WeightType};
 use dlgs::payload::raw_canonical::{self, RawCodec};
-use dlgs::payload::sorted_grid::{self, QuantBits};
+use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::payload::time_features::{self, TfeaBody, Tiling};
 use dlgs::payload::{decode_canonical, delta_residual, lang_decoder, ntc_residual};
 use dlgs::{Canonical, Error, ErrorKind, Result};
@@ -180,6 +180,10 @@ pub struct EncoderConfig {
     /// order (layouts 0 and 1). 13-14 % fewer position bytes on the real scenes; the grid sort
     /// (`CanonicalCodec::Sorted`'s `sort`) then does not apply to the static set.
     pub octree_positions: bool,
+    /// With `octree_positions`: store the rotations of Gaussians too small for a rotation
+    /// step to move their surface by `factor` position steps up to `max_shift` bits coarser
+    /// (layout 3, §6.5.6); `None` = every rotation at its group's bits (layout 2).
+    pub rotation_coarsening: Option<RotationCoarsening>,
 }
 
 impl Default for EncoderConfig {
@@ -202,6 +206,7 @@ impl Default for EncoderConfig {
             shape_tolerance: 0.0,
             tier_weights: Vec::new(),
             octree_positions: true,
+            rotation_coarsening: Some(RotationCoarsening::DEFAULT),
         }
     }
 }
@@ -415,6 +420,7 @@ impl<W: Write> StreamEncoder<W> {
                         self.cfg.zstd_level,
                         self.cfg.reallocate_bits,
                         octree,
+                        self.cfg.rotation_coarsening,
                         |_| {},
                     )?;
                     bits = a.bits;
@@ -433,6 +439,7 @@ impl<W: Write> StreamEncoder<W> {
                     static_weight: weights.as_deref(),
                     dynamics: &sorted.dynamics,
                     dynamic_bits: &bits,
+                    rotation_coarsening: self.cfg.rotation_coarsening,
                 };
                 let (payload, order) = if octree {
                     let (payload, stored) = sorted_grid::encode_octree(&gop, self.cfg.zstd_level)?;

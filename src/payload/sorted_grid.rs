@@ -141,6 +141,9 @@ enum Kind {
     Lang(usize),
 }
 
+/// Index of `Kind::Rotation(0)` in every set's channel list.
+const FIRST_ROTATION: usize = 7;
+
 fn channels(g: &Gaussians) -> Vec<Kind> {
     let mut k: Vec<Kind> = (0..3).map(Kind::Position).collect();
     k.extend((0..3).map(Kind::LogScale));
@@ -305,6 +308,84 @@ pub fn dequantise(q: u16, min: f32, max: f32, bits: u8) -> f32 {
     min + q as f32 * ((max - min) / levels(bits))
 }
 
+/// Largest rotation shift a layout-3 set may give (§6.5.6).
+pub const MAX_ROTATION_SHIFT: u8 = 8;
+
+/// How many bits coarser a Gaussian's three stored rotation components are (§6.5.6): the
+/// number of halvings from `exp(threshold)` down to its largest scale, at most `max_shift`.
+/// A rotation error turns a Gaussian by an angle that moves its surface by about the angle
+/// times its largest scale: a small Gaussian may turn more for the same displacement.
+/// f32 arithmetic in this order, so every reader gets the same shifts from the same file.
+pub fn rotation_shift(log_scale: [f32; 3], threshold: f32, max_shift: u8) -> u8 {
+    let largest = log_scale[0].max(log_scale[1]).max(log_scale[2]);
+    let x = (threshold - largest) * std::f32::consts::LOG2_E;
+    if x >= 1.0 {
+        x.floor().min(max_shift as f32) as u8
+    } else {
+        0
+    }
+}
+
+/// Encoder setting for layout 3 (§6.5.6): rotations of Gaussians smaller than `factor`
+/// position steps per rotation step are stored up to `max_shift` bits coarser.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RotationCoarsening {
+    /// Surface displacement allowed by one (coarsened) rotation step, in position steps.
+    pub factor: f32,
+    pub max_shift: u8,
+}
+
+impl RotationCoarsening {
+    /// The reference encoder's default (`dlgs encode` without `--coarse-rotations`): on the
+    /// real SH 0 scenes and gsplat 1-4 % fewer bytes for 0.00-0.33 dB (BENCHMARKS.md).
+    pub const DEFAULT: RotationCoarsening = RotationCoarsening {
+        factor: 1.0,
+        max_shift: 4,
+    };
+}
+
+/// The stored (max shift, threshold) of a set whose channels hold `chans` (positions
+/// quantised): `exp(threshold)` is the largest scale whose one-step turn moves its surface by
+/// `factor` position steps. Shift 0 (no coarsening) when that is not finite.
+fn coarsening_record(chans: &[(u8, f32, f32, Vec<u16>)], c: RotationCoarsening) -> (u8, f32) {
+    let step = position_steps(chans).into_iter().fold(0.0f64, f64::max);
+    let rot_bits = chans[7].0;
+    // One rotation step turns by about twice the component step, 2 * sqrt(2) / levels.
+    let turn = 2.0 * std::f64::consts::SQRT_2 / levels(rot_bits) as f64;
+    let t = (c.factor as f64 * step / turn).ln() as f32;
+    if t.is_finite() && c.max_shift > 0 {
+        (c.max_shift.min(MAX_ROTATION_SHIFT), t)
+    } else {
+        (0, 0.0)
+    }
+}
+
+/// Layout 3 stores the rotation index and components of the cells with shift 0 first, then
+/// those with shift 1, and so on, each class in grid order (§6.5.6): the coders' adaptive
+/// models then learn one class's narrower values at a time. `order[j]` = grid cell stored
+/// `j`-th.
+pub fn cells_by_shift(shifts: &[u8]) -> Vec<u32> {
+    // A counting sort: stable, one pass per class count.
+    let mut start = [0usize; 257];
+    for &s in shifts {
+        start[s as usize + 1] += 1;
+    }
+    for k in 1..start.len() {
+        start[k] += start[k - 1];
+    }
+    let mut order = vec![0u32; shifts.len()];
+    for (i, &s) in shifts.iter().enumerate() {
+        order[start[s as usize]] = i as u32;
+        start[s as usize] += 1;
+    }
+    order
+}
+
+/// `2^-shift` (exact in f32).
+fn halvings(shift: u8) -> f32 {
+    1.0 / (1u32 << shift) as f32
+}
+
 /// Grid width for `n` cells: `ceil(sqrt(n))` (0 for an empty set).
 pub fn grid_width(n: usize) -> usize {
     if n == 0 {
@@ -356,6 +437,8 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
 struct CodedSet {
     channels: Vec<Channel>,
     octree: Option<Vec<u8>>,
+    /// Layout 3's (max shift, threshold) of rotation coarsening (§6.5.6).
+    coarsening: Option<(u8, f32)>,
     /// `order[k]` = index in the given set of the Gaussian stored `k`-th.
     order: Vec<u32>,
 }
@@ -370,6 +453,7 @@ fn code_set(
     zstd_level: i32,
     weight: Option<&[f32]>,
     octree: bool,
+    coarsen: Option<RotationCoarsening>,
 ) -> CodedSet {
     let w = grid_width(g.len()).max(1);
     let mut chans = quantise_set(g, bits).channels;
@@ -405,8 +489,42 @@ fn code_set(
     };
     // Octree positions are final: shaping starts after them.
     let first = if octree { 3 } else { 0 };
+    let coarsening = coarsen
+        .filter(|_| octree)
+        .map(|c| coarsening_record(&chans, c));
+    // Rotation shifts follow the final log-scale levels: shape up to the rotations, requantise
+    // them coarsened, then shape the rest.
+    let rot0 = FIRST_ROTATION;
     if let Some(weight) = weight {
-        shape_channels(g, &mut chans, weight, w, zstd_level, first);
+        shape_channels(g, &mut chans, weight, w, zstd_level, first..rot0, None);
+    }
+    let shifts = coarsening.filter(|c| c.0 > 0).map(|(max_shift, t)| {
+        let ls: Vec<Vec<f32>> = chans[3..6]
+            .iter()
+            .map(|(b, lo, hi, q)| q.iter().map(|&v| dequantise(v, *lo, *hi, *b)).collect())
+            .collect();
+        let shifts: Vec<u8> = (0..g.len())
+            .map(|i| rotation_shift([ls[0][i], ls[1][i], ls[2][i]], t, max_shift))
+            .collect();
+        for a in 0..3 {
+            let (b, lo, hi, ref mut q) = chans[rot0 + a];
+            *q = values(g, Kind::Rotation(a))
+                .iter()
+                .zip(&shifts)
+                .map(|(&v, &s)| quantise(v * halvings(s), lo, hi, b))
+                .collect();
+        }
+        shifts
+    });
+    if let Some(weight) = weight {
+        let all = rot0..chans.len();
+        shape_channels(g, &mut chans, weight, w, zstd_level, all, shifts.as_deref());
+    }
+    if let Some(shifts) = &shifts {
+        let by_shift = cells_by_shift(shifts);
+        for (_, _, _, q) in &mut chans[rot0 - 1..rot0 + 3] {
+            *q = by_shift.iter().map(|&i| q[i as usize]).collect();
+        }
     }
     let channels = (0..chans.len())
         .into_par_iter()
@@ -440,6 +558,7 @@ fn code_set(
     CodedSet {
         channels,
         octree: tree,
+        coarsening,
         order,
     }
 }
@@ -452,19 +571,21 @@ fn position_steps(chans: &[(u8, f32, f32, Vec<u16>)]) -> [f64; 3] {
 }
 
 /// Replace each channel's nearest levels (but the rotation index's) by the [`grid_shaping`]
-/// variant, or the nearest levels themselves, that codes smallest, from channel `first` on. In
-/// payload order: codec 4 and its shaper need the previous channel's final cells.
+/// variant, or the nearest levels themselves, that codes smallest, for the channels `which`. In
+/// payload order: codec 4 and its shaper need the previous channel's final cells. `shifts`:
+/// the rotation shifts of a layout-3 set (§6.5.6).
 fn shape_channels(
     g: &Gaussians,
     chans: &mut [(u8, f32, f32, Vec<u16>)],
     weight: &[f32],
     width: usize,
     zstd_level: i32,
-    first: usize,
+    which: std::ops::Range<usize>,
+    shifts: Option<&[u8]>,
 ) {
     assert_eq!(weight.len(), g.len(), "one weight per Gaussian");
     let kinds = channels(g);
-    for j in first..chans.len() {
+    for j in which {
         let (b, min, max, ref q0) = chans[j];
         if kinds[j] == Kind::RotIndex || !(max > min) {
             continue;
@@ -473,7 +594,13 @@ fn shape_channels(
             .checked_sub(1)
             .map(|p| (chans[p].3.as_slice(), chans[p].0));
         let scale = levels(b) / (max - min);
-        let exact: Vec<f32> = values(g, kinds[j])
+        let mut v = values(g, kinds[j]);
+        if let (Kind::Rotation(_), Some(s)) = (kinds[j], shifts) {
+            for (x, &s) in v.iter_mut().zip(s) {
+                *x *= halvings(s);
+            }
+        }
+        let exact: Vec<f32> = v
             .iter()
             .map(|&v| ((v - min) * scale).clamp(0.0, levels(b)))
             .collect();
@@ -519,8 +646,9 @@ fn encode_set(
     zstd_level: i32,
     weight: Option<&[f32]>,
     octree: bool,
+    coarsen: Option<RotationCoarsening>,
 ) -> Vec<u32> {
-    let coded = code_set(g, bits, zstd_level, weight, octree);
+    let coded = code_set(g, bits, zstd_level, weight, octree, coarsen);
     out.put_u32(grid_width(g.len()) as u32);
     out.put_u16(coded.channels.len() as u16);
     let mut chans = coded.channels.iter();
@@ -533,6 +661,10 @@ fn encode_set(
         }
         out.put_u32(tree.len() as u32);
         out.extend_from_slice(tree);
+    }
+    if let Some((max_shift, threshold)) = coded.coarsening {
+        out.put_u8(max_shift);
+        out.put_f32(threshold);
     }
     for c in chans {
         out.put_u8(c.bits);
@@ -554,7 +686,7 @@ pub fn breakdown(
     octree: bool,
 ) -> Vec<(&'static str, usize)> {
     let kinds = channels(g);
-    let coded = code_set(g, bits, zstd_level, None, octree);
+    let coded = code_set(g, bits, zstd_level, None, octree, None);
     let tree = coded
         .octree
         .as_ref()
@@ -622,8 +754,16 @@ pub fn encode_shaped(
     c.statics.check_finite()?;
     c.dynamics.check_finite()?;
     let mut out = vec![0u8]; // layout version
-    encode_set(&mut out, &c.statics, bits, zstd_level, static_weight, false);
-    encode_set(&mut out, &c.dynamics, bits, zstd_level, None, false);
+    encode_set(
+        &mut out,
+        &c.statics,
+        bits,
+        zstd_level,
+        static_weight,
+        false,
+        None,
+    );
+    encode_set(&mut out, &c.dynamics, bits, zstd_level, None, false, None);
     Ok(out)
 }
 
@@ -644,11 +784,12 @@ pub fn encode_parts(
         static_weight: None,
         dynamics,
         dynamic_bits,
+        rotation_coarsening: None,
     };
     Ok(encode_parted(&parts, zstd_level, false)?.0)
 }
 
-/// A canonical GOP to store as parts (layouts 1 and 2).
+/// A canonical GOP to store as parts (layouts 1, 2 and 3).
 pub struct PartedGop<'a> {
     /// The static set's parts, each with its bits, in stored order.
     pub static_parts: &'a [(Gaussians, QuantBits)],
@@ -656,11 +797,15 @@ pub struct PartedGop<'a> {
     pub static_weight: Option<&'a [f32]>,
     pub dynamics: &'a Gaussians,
     pub dynamic_bits: &'a QuantBits,
+    /// With octree positions: store the static parts in layout 3, rotations of small
+    /// Gaussians coarser (§6.5.6). Ignored without octree positions.
+    pub rotation_coarsening: Option<RotationCoarsening>,
 }
 
 /// Encode a canonical GOP in layout 2 (§6.5.2, since 1.10): as [`encode_parts`], but each
 /// static part's positions are an octree and its Gaussians are stored in the order readers
-/// derive from them (§6.5.5). Returns the payload and that order: `order[k]` = index, in the
+/// derive from them (§6.5.5); in layout 3 (since 1.11) when `gop.rotation_coarsening` is set,
+/// with the rotations of small Gaussians coarser (§6.5.6). Returns the payload and that order: `order[k]` = index, in the
 /// parts' concatenation, of the `k`-th static Gaussian stored.
 pub fn encode_octree(gop: &PartedGop, zstd_level: i32) -> Result<(Vec<u8>, Vec<u32>)> {
     encode_parted(gop, zstd_level, true)
@@ -695,14 +840,20 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
             )));
         }
     }
-    let mut out = vec![if octree { 2u8 } else { 1 }]; // layout version
+    let coarsen = gop.rotation_coarsening.filter(|_| octree);
+    let layout = match (octree, coarsen) {
+        (false, _) => 1u8,
+        (true, None) => 2,
+        (true, Some(_)) => 3,
+    };
+    let mut out = vec![layout];
     out.put_u8(static_parts.len() as u8);
     let mut order = Vec::with_capacity(n_static);
     let mut start = 0;
     for (g, b) in static_parts {
         out.put_u32(g.len() as u32);
         let weight = gop.static_weight.map(|w| &w[start..start + g.len()]);
-        let local = encode_set(&mut out, g, b, zstd_level, weight, octree);
+        let local = encode_set(&mut out, g, b, zstd_level, weight, octree, coarsen);
         order.extend(local.into_iter().map(|i| i + start as u32));
         start += g.len();
     }
@@ -715,6 +866,7 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
         zstd_level,
         None,
         false,
+        None,
     );
     Ok((out, order))
 }
@@ -729,13 +881,24 @@ fn bad_at(reason: String, at: u64) -> Error {
     )
 }
 
+/// How a set's record is laid out (by the `CSOG` layout version).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SetForm {
+    /// Every channel a grid record (layouts 0 and 1, and every dynamic set).
+    Grid,
+    /// Positions as an octree (layout 2's static parts).
+    Octree,
+    /// An octree and a rotation coarsening record (layout 3's static parts).
+    OctreeCoarse,
+}
+
 fn decode_set(
     r: &mut ByteReader,
     n: usize,
     sh_degree: u8,
     lang_width: usize,
     limits: &Limits,
-    octree: bool,
+    form: SetForm,
 ) -> Result<Gaussians> {
     let mut g = Gaussians::new(sh_degree, lang_width);
     let kinds = channels(&g);
@@ -766,12 +929,25 @@ fn decode_set(
     // An octree set's positions come first, already in grid order (§6.5.5).
     type Stored<'a> = (Kind, u8, GridCodec, f32, f32, &'a [u8], u64);
     let mut stored: Vec<Stored> = Vec::with_capacity(kinds.len());
-    let tree = if octree {
+    let tree = if form != SetForm::Grid {
         let t = read_octree_record(r)?;
         for (a, &(min, max)) in t.ranges.iter().enumerate() {
             stored.push((kinds[a], t.bits, GridCodec::Constant, min, max, &[], 0));
         }
         Some(t)
+    } else {
+        None
+    };
+    let coarsening = if form == SetForm::OctreeCoarse {
+        let at = r.offset();
+        let max_shift = r.u8("CSOG rotation max shift")?;
+        if max_shift > MAX_ROTATION_SHIFT {
+            return Err(bad_at(
+                format!("rotation max shift {max_shift} (at most {MAX_ROTATION_SHIFT})"),
+                at,
+            ));
+        }
+        Some((max_shift, r.finite_f32("CSOG rotation threshold")?))
     } else {
         None
     };
@@ -879,7 +1055,7 @@ fn decode_set(
         .into_iter()
         .chain(by_chain.into_iter().flatten().flatten())
         .collect();
-    let decoded: Vec<(u8, Vec<f32>)> = stored
+    let mut decoded: Vec<(u8, Vec<f32>)> = stored
         .par_iter()
         .zip(cells)
         .map(|(&(k, bits, _, min, max, ..), q)| {
@@ -890,6 +1066,25 @@ fn decode_set(
             (bits, v)
         })
         .collect();
+    // Layout 3: shifts from the decoded log-scales; rotation cells back to grid order.
+    let shifts = coarsening.filter(|c| c.0 > 0).map(|(max_shift, t)| {
+        let ls = &decoded[3..6];
+        let shifts: Vec<u8> = (0..n)
+            .into_par_iter()
+            .map(|i| rotation_shift([ls[0].1[i], ls[1].1[i], ls[2].1[i]], t, max_shift))
+            .collect();
+        let by_shift = cells_by_shift(&shifts);
+        decoded[FIRST_ROTATION - 1..FIRST_ROTATION + 3]
+            .par_iter_mut()
+            .for_each(|(_, v)| {
+                let mut grid = vec![0.0f32; n];
+                for (&i, &x) in by_shift.iter().zip(v.iter()) {
+                    grid[i as usize] = x;
+                }
+                *v = grid;
+            });
+        shifts
+    });
     let mut ch = decoded.into_iter();
     let mut next = || ch.next().expect("one decoded channel per kind");
     let zip3 = |a: Vec<f32>, b: Vec<f32>, c: Vec<f32>| -> Vec<[f32; 3]> {
@@ -901,7 +1096,12 @@ fn decode_set(
     let rest = zip3(next().1, next().1, next().1);
     g.rotations = (0..n)
         .map(|i| {
-            let r = rest[i];
+            let mut r = rest[i];
+            if let Some(s) = &shifts {
+                // Exact: a power of two (§6.5.6).
+                let up = (1u32 << s[i]) as f32;
+                r = r.map(|v| v * up);
+            }
             let big = (1.0 - (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]))
                 .max(0.0)
                 .sqrt();
@@ -988,7 +1188,7 @@ fn decode_parts(
     sh_degree: u8,
     lang_width: usize,
     limits: &Limits,
-    octree: bool,
+    form: SetForm,
 ) -> Result<Gaussians> {
     let at = r.offset();
     let parts = r.u8("CSOG part count")? as usize;
@@ -1007,7 +1207,7 @@ fn decode_parts(
             ));
         }
         left -= np;
-        g.extend(&decode_set(r, np, sh_degree, lang_width, limits, octree)?);
+        g.extend(&decode_set(r, np, sh_degree, lang_width, limits, form)?);
     }
     if left != 0 {
         return Err(bad_at(
@@ -1040,16 +1240,19 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let (ns, nd) = (scene.n_static as usize, scene.n_dynamic as usize);
     let (statics, dynamics) = match version {
         0 => (
-            decode_set(&mut r, ns, sh, lw, limits, false)?,
-            decode_set(&mut r, nd, sh, lw, limits, false)?,
+            decode_set(&mut r, ns, sh, lw, limits, SetForm::Grid)?,
+            decode_set(&mut r, nd, sh, lw, limits, SetForm::Grid)?,
         ),
-        1 | 2 => (
-            decode_parts(&mut r, ns, sh, lw, limits, version == 2)?,
-            decode_parts(&mut r, nd, sh, lw, limits, false)?,
-        ),
+        1..=3 => {
+            let form = [SetForm::Grid, SetForm::Octree, SetForm::OctreeCoarse];
+            (
+                decode_parts(&mut r, ns, sh, lw, limits, form[version as usize - 1])?,
+                decode_parts(&mut r, nd, sh, lw, limits, SetForm::Grid)?,
+            )
+        }
         _ => {
             return Err(bad_at(
-                format!("layout version {version} (this reader knows 0, 1 and 2)"),
+                format!("layout version {version} (this reader knows 0 to 3)"),
                 at,
             ))
         }
@@ -1113,6 +1316,30 @@ mod tests {
                 assert!((dot.abs() - 1.0).abs() < 1e-5, "{q:?}");
             }
         }
+    }
+
+    #[test]
+    fn rotation_shifts_count_halvings_and_survive_degenerate_scales() {
+        let t = 0.0f32; // exp(threshold) = 1
+        let ln2 = std::f32::consts::LN_2;
+        // Largest scale 1: no shift; 1/2 (one halving): 1; 1/4: 2; far below: the max.
+        assert_eq!(rotation_shift([0.0, -5.0, -9.0], t, 4), 0);
+        assert_eq!(rotation_shift([-ln2 * 1.0001, -9.0, -9.0], t, 4), 1);
+        assert_eq!(rotation_shift([-9.0, -ln2 * 2.0001, -9.0], t, 4), 2);
+        assert_eq!(rotation_shift([-30.0; 3], t, 4), 4);
+        assert_eq!(rotation_shift([-30.0; 3], t, 0), 0, "max shift 0 = off");
+        // Larger than exp(threshold), NaN or infinite: defined, never a panic.
+        assert_eq!(rotation_shift([3.0; 3], t, 4), 0);
+        assert_eq!(rotation_shift([f32::NAN; 3], t, 4), 0);
+        assert_eq!(rotation_shift([f32::NAN, -30.0, f32::NAN], t, 4), 4);
+        assert_eq!(rotation_shift([f32::INFINITY; 3], t, 4), 0);
+        assert_eq!(rotation_shift([f32::NEG_INFINITY; 3], t, 8), 8);
+    }
+
+    #[test]
+    fn cells_by_shift_is_a_stable_grouping() {
+        assert_eq!(cells_by_shift(&[2, 0, 1, 0, 2]), vec![1, 3, 2, 0, 4]);
+        assert!(cells_by_shift(&[]).is_empty());
     }
 
     #[test]

@@ -84,21 +84,27 @@ pub fn all() -> Vec<Vector> {
     ];
     v.push(Vector {
         name: "lod3-csog-medium",
-        bytes: csog(&lod3, Vec::new(), false),
+        bytes: csog(&lod3, Vec::new(), false, None),
         error: None,
         about: "the lod3 scene as sorted quantised grids (CSOG layout 0, grid positions, preset medium, default sort)",
     });
     v.push(Vector {
         name: "lod3-csog-tiered",
-        bytes: csog(&lod3, vec![0.1, 0.02], false),
+        bytes: csog(&lod3, vec![0.1, 0.02], false, None),
         error: None,
         about: "the lod3 scene as CSOG layout 1 (since 1.8, grid positions): preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser and those holding 2 % two bits coarser, three parts",
     });
     v.push(Vector {
         name: "lod3-csog-octree",
-        bytes: csog(&lod3, vec![0.1], true),
+        bytes: csog(&lod3, vec![0.1], true, None),
         error: None,
         about: "the lod3 scene as CSOG layout 2 (since 1.10): octree positions, the order derived from them; preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser, two parts",
+    });
+    v.push(Vector {
+        name: "lod3-csog-coarse-rot",
+        bytes: csog(&lod3, vec![0.1], true, Some(COARSE_ROTATIONS)),
+        error: None,
+        about: "the lod3 scene as CSOG layout 3 (since 1.11): lod3-csog-octree with coarse rotations (factor 16, max shift 4): each part's small Gaussians store rotations up to 4 bits coarser, the rotation records' cells grouped by shift",
     });
     v.push(Vector {
         name: DYNAMIC_VECTOR,
@@ -462,7 +468,19 @@ pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
 
 /// The lod3 scene as a still `CSOG` at preset medium with these importance tiers, with octree
 /// positions (layout 2) or grid positions (layouts 0 and 1).
-fn csog(g: &dlgs::Gaussians, tier_weights: Vec<f64>, octree_positions: bool) -> Vec<u8> {
+/// The coarse-rotation vector's setting: a large factor, so every shift class occurs in lod3.
+pub const COARSE_ROTATIONS: dlgs::payload::sorted_grid::RotationCoarsening =
+    dlgs::payload::sorted_grid::RotationCoarsening {
+        factor: 16.0,
+        max_shift: 4,
+    };
+
+fn csog(
+    g: &dlgs::Gaussians,
+    tier_weights: Vec<f64>,
+    octree_positions: bool,
+    rotation_coarsening: Option<dlgs::payload::sorted_grid::RotationCoarsening>,
+) -> Vec<u8> {
     use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
     let cfg = EncoderConfig {
         canonical: CanonicalCodec::Sorted {
@@ -471,6 +489,7 @@ fn csog(g: &dlgs::Gaussians, tier_weights: Vec<f64>, octree_positions: bool) -> 
         },
         tier_weights,
         octree_positions,
+        rotation_coarsening,
         ..Default::default()
     };
     dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()

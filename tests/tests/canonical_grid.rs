@@ -9,8 +9,8 @@ use dlgs::container::SceneHeader;
 use dlgs::model::{Canonical, Gaussians};
 use dlgs::payload::grid_coder::{self, GridCodec};
 use dlgs::payload::sorted_grid::{
-    self, dequantise, quantise_set, robust_radius, QuantBits, LOG_SCALE_BELOW_RADIUS,
-    LOG_SCALE_SPAN,
+    self, dequantise, quantise_set, robust_radius, rotation_shift, QuantBits, RotationCoarsening,
+    LOG_SCALE_BELOW_RADIUS, LOG_SCALE_SPAN,
 };
 use dlgs::Limits;
 use dlgs_decoder::Decoder;
@@ -738,8 +738,8 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
         err(&b)
     );
     let mut b = p.clone();
-    b[0] = 3;
-    assert!(err(&b).contains("layout version 3"), "{}", err(&b));
+    b[0] = 4;
+    assert!(err(&b).contains("layout version 4"), "{}", err(&b));
 }
 
 #[test]
@@ -805,6 +805,11 @@ type OctreeGop = (Canonical, Vec<(Gaussians, QuantBits)>, Vec<u8>, Vec<u32>);
 
 /// Layout 2 of the real lod3 scene in three parts, with the dynamic set the last 200.
 fn octree_lod3() -> OctreeGop {
+    octree_lod3_with(None)
+}
+
+/// [`octree_lod3`], in layout 3 when `coarsening` is set.
+fn octree_lod3_with(coarsening: Option<RotationCoarsening>) -> OctreeGop {
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let cut = |r: std::ops::Range<u32>| permute(&g, &r.collect::<Vec<u32>>());
     let parts = vec![
@@ -818,6 +823,7 @@ fn octree_lod3() -> OctreeGop {
         static_weight: None,
         dynamics: &dynamics,
         dynamic_bits: &QuantBits::HIGH,
+        rotation_coarsening: coarsening,
     };
     let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
     let c = Canonical {
@@ -927,6 +933,127 @@ fn damaged_octree_sets_give_typed_errors_not_panics() {
         let mut b = p.clone();
         let at = 41 + (s as usize >> 8) % 4000;
         b[at] ^= 1 << (s % 8);
+        let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
+    }
+}
+
+/// Layout 3 of [`octree_lod3`] with a large factor, so every shift class occurs.
+const COARSE: RotationCoarsening = RotationCoarsening {
+    factor: 16.0,
+    max_shift: 4,
+};
+
+/// The first part's (max shift, threshold) and the byte offset of the max shift.
+fn first_coarsening(p: &[u8]) -> (u8, f32, usize) {
+    // Layout, part count, part size, width, channel count, position bits and ranges, then the
+    // octree's length and bytes.
+    let len = u32::from_le_bytes(p[37..41].try_into().unwrap()) as usize;
+    let at = 41 + len;
+    let t = f32::from_le_bytes(p[at + 1..at + 5].try_into().unwrap());
+    (p[at], t, at)
+}
+
+#[test]
+fn coarse_rotation_sets_turn_small_gaussians_within_their_shifted_steps() {
+    // Layout 3 (format 1.11): a Gaussian with shift k stores its rotation components times
+    // 2^-k, so its error may be 2^k times larger; everything else decodes as in layout 2.
+    let (c, parts, p2, order2) = octree_lod3();
+    let (_, _, p3, order3) = octree_lod3_with(Some(COARSE));
+    assert_eq!(p3[0], 3, "layout 3");
+    assert_eq!(order3, order2, "the order follows the positions alone");
+    assert!(p3.len() < p2.len(), "{} B vs {} B", p3.len(), p2.len());
+    let scene = scene_of(&c);
+    let d2 = sorted_grid::decode(&p2, 0, &scene, &Limits::default()).unwrap();
+    let d3 = sorted_grid::decode(&p3, 0, &scene, &Limits::default()).unwrap();
+    assert_eq!(d3.statics.positions, d2.statics.positions);
+    assert_eq!(d3.statics.log_scales, d2.statics.log_scales);
+    assert_eq!(d3.statics.sh, d2.statics.sh);
+    assert_eq!(d3.statics.opacity, d2.statics.opacity);
+    assert_eq!(d3.dynamics.rotations, d2.dynamics.rotations);
+    let (max_shift, t, _) = first_coarsening(&p3);
+    assert_eq!(max_shift, 4);
+    // The first part (medium: 8 rotation bits): each component within half a shifted step of
+    // the source's sign-fixed normalised component.
+    let n0 = parts[0].0.len();
+    let step = std::f32::consts::SQRT_2 / 255.0;
+    let mut per_shift = [0usize; 5];
+    for k in 0..n0 {
+        let shift = rotation_shift(d3.statics.log_scales[k], t, max_shift);
+        per_shift[shift as usize] += 1;
+        let src = normalised(c.statics.rotations[order3[k] as usize]);
+        let got = normalised(d3.statics.rotations[k]);
+        let bound = 0.5 * step * (1u32 << shift) as f32 * 1.01 + 1e-5;
+        // The stored three are the source's smallest (sign: its largest component positive);
+        // the largest follows from them, with up to ~4x their error.
+        let m = (0..4)
+            .max_by(|&a, &b| src[a].abs().total_cmp(&src[b].abs()).then(b.cmp(&a)))
+            .unwrap();
+        let (ss, sg) = (src[m].signum(), if got[m] < 0.0 { -1.0 } else { 1.0 });
+        for a in 0..4 {
+            let e = (src[a] * ss - got[a] * sg).abs();
+            let b = if a == m { 5.0 * bound } else { bound };
+            assert!(
+                e <= b,
+                "Gaussian {k}, shift {shift}, component {a}: error {e}"
+            );
+        }
+        if shift == 0 {
+            assert_eq!(d3.statics.rotations[k], d2.statics.rotations[k], "{k}");
+        }
+    }
+    assert!(
+        per_shift.iter().all(|&m| m > 0),
+        "every shift class occurs in lod3 at factor 16: {per_shift:?}"
+    );
+}
+
+/// Unit quaternion.
+fn normalised(q: [f32; 4]) -> [f32; 4] {
+    let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+    q.map(|v| v / n)
+}
+
+#[test]
+fn coarse_rotation_sets_decode_the_same_floats_on_any_thread_count() {
+    let (c, _, p, _) = octree_lod3_with(Some(COARSE));
+    let run = |n: usize| {
+        on_threads(n, || {
+            let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+            dlgs::payload::raw_canonical::canonical_body(&d)
+        })
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(5));
+}
+
+#[test]
+fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
+    let (c, _, p, _) = octree_lod3_with(Some(COARSE));
+    let scene = scene_of(&c);
+    let err = |b: &[u8]| {
+        sorted_grid::decode(b, 0, &scene, &Limits::default())
+            .unwrap_err()
+            .to_string()
+    };
+    let (_, _, at) = first_coarsening(&p);
+    let mut b = p.clone();
+    b[at] = 9;
+    assert!(err(&b).contains("rotation max shift 9"), "{}", err(&b));
+    let mut b = p.clone();
+    b[at + 1..at + 5].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    assert!(err(&b).contains("rotation threshold"), "{}", err(&b));
+    // Max shift 0 turns coarsening off: the file still decodes (to other rotations).
+    let mut b = p.clone();
+    b[at] = 0;
+    assert!(sorted_grid::decode(&b, 0, &scene, &Limits::default()).is_ok());
+    // Flipped bits around the record and in the rotation channels: never a panic.
+    let mut s = 11u32;
+    for _ in 0..300 {
+        s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        let mut b = p.clone();
+        let i = at + (s as usize >> 8) % (p.len() - at);
+        b[i] ^= 1 << (s % 8);
         let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
     }
 }
