@@ -888,16 +888,19 @@ fn octree_sets_decode_in_the_order_the_encoder_reports() {
 
 #[test]
 fn octree_sets_decode_the_same_floats_on_any_thread_count() {
-    let (c, _, p, _) = octree_lod3();
-    let run = |n: usize| {
-        on_threads(n, || {
-            let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
-            dlgs::payload::raw_canonical::canonical_body(&d)
-        })
-    };
-    let one = run(1);
-    assert_eq!(one, run(2));
-    assert_eq!(one, run(5));
+    // Layout 2, and layout 3 whose rotation shifts and regrouping also run in parallel.
+    for coarsening in [None, Some(COARSE)] {
+        let (c, _, p, _) = octree_lod3_with(coarsening);
+        let run = |n: usize| {
+            on_threads(n, || {
+                let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+                dlgs::payload::raw_canonical::canonical_body(&d)
+            })
+        };
+        let one = run(1);
+        assert_eq!(one, run(2), "{coarsening:?}");
+        assert_eq!(one, run(5), "{coarsening:?}");
+    }
 }
 
 #[test]
@@ -1011,20 +1014,6 @@ fn coarse_rotation_sets_turn_small_gaussians_within_their_shifted_steps() {
 fn normalised(q: [f32; 4]) -> [f32; 4] {
     let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
     q.map(|v| v / n)
-}
-
-#[test]
-fn coarse_rotation_sets_decode_the_same_floats_on_any_thread_count() {
-    let (c, _, p, _) = octree_lod3_with(Some(COARSE));
-    let run = |n: usize| {
-        on_threads(n, || {
-            let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
-            dlgs::payload::raw_canonical::canonical_body(&d)
-        })
-    };
-    let one = run(1);
-    assert_eq!(one, run(2));
-    assert_eq!(one, run(5));
 }
 
 #[test]
