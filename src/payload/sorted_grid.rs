@@ -349,7 +349,7 @@ impl RotationCoarsening {
 /// `factor` position steps. Shift 0 (no coarsening) when that is not finite.
 fn coarsening_record(chans: &[(u8, f32, f32, Vec<u16>)], c: RotationCoarsening) -> (u8, f32) {
     let step = position_steps(chans).into_iter().fold(0.0f64, f64::max);
-    let rot_bits = chans[7].0;
+    let rot_bits = chans[FIRST_ROTATION].0;
     // One rotation step turns by about twice the component step, 2 * sqrt(2) / levels.
     let turn = 2.0 * std::f64::consts::SQRT_2 / levels(rot_bits) as f64;
     let t = (c.factor as f64 * step / turn).ln() as f32;
@@ -365,7 +365,7 @@ fn coarsening_record(chans: &[(u8, f32, f32, Vec<u16>)], c: RotationCoarsening) 
 /// models then learn one class's narrower values at a time. `order[j]` = grid cell stored
 /// `j`-th.
 pub fn cells_by_shift(shifts: &[u8]) -> Vec<u32> {
-    // A counting sort: stable, one pass per class count.
+    // A counting sort: stable and linear (at most 256 classes).
     let mut start = [0usize; 257];
     for &s in shifts {
         start[s as usize + 1] += 1;
