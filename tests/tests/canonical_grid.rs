@@ -1046,3 +1046,44 @@ fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
         let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
     }
 }
+
+#[test]
+fn degenerate_gaussians_decode_finite_in_coarse_rotation_sets() {
+    // Layout 3: collapsed (e^-30) and huge (e^12) scales give the largest and the smallest
+    // shift; a zero quaternion still decodes near the identity, within its coarsened step.
+    let mut g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    for i in 0..50 {
+        g.rotations[i] = [0.0; 4];
+        g.log_scales[i] = [if i % 2 == 0 { -30.0 } else { 12.0 }; 3];
+        g.opacity[i] = if i % 2 == 0 { -1e4 } else { 1e4 };
+    }
+    for p in &mut g.positions {
+        p[0] = 0.25; // a constant channel
+    }
+    let parts = [(g.clone(), QuantBits::LOW)];
+    let empty = Gaussians::new(g.sh_degree, 0);
+    let gop = sorted_grid::PartedGop {
+        static_parts: &parts,
+        static_weight: None,
+        dynamics: &empty,
+        dynamic_bits: &QuantBits::LOW,
+        rotation_coarsening: Some(RotationCoarsening::DEFAULT),
+    };
+    let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
+    assert_eq!(p[0], 3, "layout 3");
+    let c = Canonical::from_static(g);
+    let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default())
+        .unwrap()
+        .statics;
+    assert!(d.positions.iter().all(|p| p[0] == 0.25));
+    for v in [d.log_scales.as_flattened(), d.rotations.as_flattened()] {
+        assert!(v.iter().all(|x| x.is_finite()));
+    }
+    for (k, &i) in order.iter().enumerate() {
+        if i < 50 {
+            let q = d.rotations[k];
+            let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+            assert!(q[0] / n > 0.99, "zero quaternion {i} decoded as {q:?}");
+        }
+    }
+}
