@@ -18,6 +18,7 @@ use dlgs_encoder::{
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::pending_file::PendingFile;
 use crate::scene_io::is_dlgs;
 
 /// Encoder settings shared by `encode` and `synth`.
@@ -366,9 +367,9 @@ pub(crate) fn bar(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
-fn report(input: &Path, output: &Path, frames: u32) -> Result<()> {
+/// `in_size`: the input's size, taken before encoding (the output may replace the input).
+fn report(input: &Path, in_size: u64, output: &Path, frames: u32) -> Result<()> {
     let size = std::fs::metadata(output)?.len();
-    let in_size = std::fs::metadata(input)?.len();
     println!(
         "{} -> {}: {size} bytes ({:.1}% of input), {:.0} bytes/frame over {frames} frames",
         input.display(),
@@ -385,8 +386,11 @@ pub fn run_encode(
     codec: &CodecArgs,
     residual_mode: Option<&str>,
 ) -> Result<()> {
+    let in_size = std::fs::metadata(input)
+        .with_context(|| format!("reading {}", input.display()))?
+        .len();
     let frames = encode_file(input, output, codec, residual_mode, true)?;
-    report(input, output, frames)
+    report(input, in_size, output, frames)
 }
 
 /// Encode `input` (a splat scene, or a `.dlgs` to re-encode) into `output`; returns the
@@ -399,9 +403,8 @@ pub fn encode_file(
     verbose: bool,
 ) -> Result<u32> {
     let settings = serde_json::json!(format!("{codec:?}"));
-    let f =
-        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
-    let out = std::io::BufWriter::new(f);
+    let pending = PendingFile::create(output)?;
+    let mut out = pending.writer()?;
     if !is_dlgs(input) {
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
@@ -417,9 +420,14 @@ pub fn encode_file(
             } else {
                 ProgressBar::hidden()
             };
-        let (_, report) =
-            dlgs_encoder::encode_still_reporting(&g, codec.config(meta(input, settings))?, out)?;
+        let (_, report) = dlgs_encoder::encode_still_reporting(
+            &g,
+            codec.config(meta(input, settings))?,
+            &mut out,
+        )?;
         spinner.finish_and_clear();
+        std::io::Write::flush(&mut out)?;
+        pending.commit()?;
         if verbose {
             println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
             if report.dropped_invisible > 0 {
@@ -487,6 +495,8 @@ pub fn encode_file(
     pb.finish_and_clear();
     let mut w = enc.finish()?;
     std::io::Write::flush(&mut w)?;
+    drop(w);
+    pending.commit()?;
     Ok(scene.frame_count)
 }
 
@@ -563,14 +573,9 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
         serde_json::json!({"synthetic": format!("{spec:?}"), "codec": format!("{:?}", a.codec)});
     let mut m = meta(&a.input, settings);
     m["note"] = serde_json::json!("SYNTHETIC motion and time features on a real canonical scene; not a trained DLGStream model");
-    let f = std::fs::File::create(&a.output)
-        .with_context(|| format!("creating {}", a.output.display()))?;
+    let pending = PendingFile::create(&a.output)?;
     let pb = bar(model.gops.len() as u64, "encoding");
-    let mut enc = StreamEncoder::new(
-        std::io::BufWriter::new(f),
-        model.scene.clone(),
-        a.codec.config(m)?,
-    )?;
+    let mut enc = StreamEncoder::new(pending.writer()?, model.scene.clone(), a.codec.config(m)?)?;
     for (i, (d, r)) in model.gops.iter().zip(&model.residuals).enumerate() {
         let canonical = match r {
             Some(f) => GopCanonical::Ntc(f),
@@ -583,6 +588,8 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
     pb.finish_and_clear();
     let mut w = enc.finish()?;
     std::io::Write::flush(&mut w)?;
+    drop(w);
+    pending.commit()?;
     println!(
         "synthetic dynamic model: {} static + {} dynamic Gaussians, {} GOPs x {} frames at {} FPS, keys every {} frames, residual mode {:?}",
         model.scene.n_static,
@@ -593,5 +600,6 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
         model.scene.key_interval,
         model.scene.residual_mode
     );
-    report(&a.input, &a.output, model.scene.frame_count)
+    let in_size = std::fs::metadata(&a.input)?.len();
+    report(&a.input, in_size, &a.output, model.scene.frame_count)
 }

@@ -5,6 +5,7 @@ mod encode_cmd;
 mod export_cmd;
 mod info;
 mod ingest_cmd;
+mod pending_file;
 mod play_cmd;
 mod query_cmd;
 mod rd_cmd;

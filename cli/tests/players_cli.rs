@@ -308,3 +308,44 @@ fn encode_octree_positions_by_default_and_grid_positions_on_request() {
     let err = dlgs_fails(&[&c[..], &["--coarse-rotations=-1"]].concat());
     assert!(err.contains("factor >= 0"), "{err}");
 }
+
+#[test]
+fn a_failed_encode_leaves_no_file_and_an_in_place_re_encode_reads_its_input_first() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data(SCENE);
+    let scene = scene.to_str().unwrap();
+    let out = tmp.path().join("x.dlgs");
+    let out_s = out.to_str().unwrap();
+    let listing = || {
+        let mut names: Vec<String> = std::fs::read_dir(tmp.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    // Rejected settings: nothing is created, not even an empty file or a temporary one.
+    let err = dlgs_fails(&[
+        "encode", scene, "-o", out_s, "--tiers", "0.1", "--shape", "0.1",
+    ]);
+    assert!(err.contains("cannot be combined"), "{err}");
+    assert!(listing().is_empty(), "{:?}", listing());
+    // An existing output survives a failed encode unchanged.
+    dlgs(&["encode", scene, "-o", out_s, "--quality", "high"]);
+    let before = std::fs::read(&out).unwrap();
+    dlgs_fails(&["encode", "/nonexistent/scene.ply", "-o", out_s]);
+    assert_eq!(std::fs::read(&out).unwrap(), before);
+    assert_eq!(listing(), ["x.dlgs"]);
+    // Re-encoding a stream into itself: the input is read before it is replaced.
+    let text = dlgs(&["encode", out_s, "-o", out_s, "--quality", "low"]);
+    assert!(text.contains("% of input"), "{text}");
+    let after = std::fs::read(&out).unwrap();
+    assert!(
+        after.len() < before.len(),
+        "{} vs {}",
+        after.len(),
+        before.len()
+    );
+    dlgs(&["verify", out_s]);
+    assert_eq!(listing(), ["x.dlgs"]);
+}

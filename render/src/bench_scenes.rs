@@ -1,5 +1,6 @@
-//! Real scenes for benchmarks: the 114k-Gaussian plant capture and a >= 250k scene made of
-//! real scenes placed side by side (../shared/data; override with DLGS_DATA).
+//! Real scenes for benchmarks: the 114k-Gaussian plant capture, a >= 250k scene made of real
+//! scenes placed side by side, and a mosaic of every real scene once (../shared/data; override
+//! with DLGS_DATA).
 
 use std::path::PathBuf;
 
@@ -22,7 +23,9 @@ pub fn plant() -> Gaussians {
 }
 
 /// 272,920 Gaussians: the plant twice side by side (x offset 0.6) plus the 45,624-Gaussian
-/// donut scaled into the gap, all at SH 0.
+/// donut scaled into the gap, all at SH 0. The second plant is an exact repeat of the first
+/// (moved only), which formats with long-range matching (SOG's WebP) code almost for free:
+/// [`mosaic`] has no repeats.
 pub fn big() -> Gaussians {
     let plant = plant();
     let mut out = plant.clone();
@@ -31,21 +34,56 @@ pub fn big() -> Gaussians {
         p[0] += 0.6;
     }
     out.extend(&second);
-    let donut = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
-    let (lo, hi) = donut.bounds().expect("donut has positions");
+    out.extend(&fit_into(
+        load("ply/v3dg_donut_mipsplatting_45624_sh0.ply"),
+        [0.3, -0.2, 0.0],
+    ));
+    out
+}
+
+/// 209,435 Gaussians: every real scene of the data set once (no repeats), at SH 0: the plant
+/// where it is, the six others each scaled into a 0.3 box around it.
+pub fn mosaic() -> Gaussians {
+    let mut out = plant();
+    for (rel, centre) in [
+        (
+            "ply/v3dg_donut_mipsplatting_45624_sh0.ply",
+            [0.45, -0.2, 0.0],
+        ),
+        ("ply/gsplat_DATA_new_22589_sh3.ply", [-0.45, -0.2, 0.0]),
+        (
+            "ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply",
+            [0.0, -0.2, 0.5],
+        ),
+        ("ply/gs3d-fork_lod2_tile_0_6831_sh3.ply", [0.0, -0.2, -0.5]),
+        (
+            "ply/supersplat_fruit_drops_minimal_4721_sh3.ply",
+            [0.45, -0.2, 0.5],
+        ),
+        (
+            "ply/gs3d-fork_lod3_tile_0_1971_sh3.ply",
+            [-0.45, -0.2, -0.5],
+        ),
+    ] {
+        out.extend(&fit_into(load(rel).with_sh_degree(0), centre));
+    }
+    out
+}
+
+/// `g` scaled uniformly so its largest extent is 0.3 and moved to `centre` (log-scales follow
+/// the scale; rotations are unchanged by a uniform scale).
+fn fit_into(mut g: Gaussians, centre: [f32; 3]) -> Gaussians {
+    let (lo, hi) = g.bounds().expect("a real scene has positions");
     let size = (0..3).map(|a| hi[a] - lo[a]).fold(0f32, f32::max).max(1e-6);
     let s = 0.3 / size;
-    let mut d = donut;
-    for (p, ls) in d.positions.iter_mut().zip(d.log_scales.iter_mut()) {
+    for (p, ls) in g.positions.iter_mut().zip(g.log_scales.iter_mut()) {
         for a in 0..3 {
             p[a] = (p[a] - (lo[a] + hi[a]) * 0.5) * s;
             ls[a] += s.ln();
+            p[a] += centre[a];
         }
-        p[0] += 0.3;
-        p[1] -= 0.2;
     }
-    out.extend(&d);
-    out
+    g
 }
 
 /// Add DLGStream-shaped language channels (no real language model exists here).
