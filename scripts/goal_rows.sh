@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# Issue 5's goal rows: for each real scene (and the two larger scenes built from them), the
+# smallest dlgs file found at a PSNR at least SOG's, with the exact options, against the SOG and
+# SPZ files of scripts/peers.sh. Prints a markdown table: bytes, % of SOG, % of SPZ, PSNR and
+# SSIM over the 8 orbit cameras of `dlgs compare` (SOG's in brackets), encode seconds.
+# Usage: bash scripts/goal_rows.sh  (~10 min; needs target/peers, target/peers-large and
+# target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA=${DLGS_DATA:-../shared/data}
+OUT=target/goal_rows
+mkdir -p "$OUT"
+cargo build --release -q -p dlgs-cli
+DLGS=target/release/dlgs
+export RUST_BACKTRACE=0
+[ -f target/big.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- target/big.ply
+[ -f target/mosaic.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- --mosaic target/mosaic.ply
+metric() { $DLGS compare "$1" "$2" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
+peer() { awk -F'\t' -v n="$2" -v f="$3" '$1==n && $2==f {print $3}' "$1/times.tsv"; }
+echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB (SOG's) | SSIM (SOG's) | encode s |"
+echo "|---|---|---|---|---|---|---|---|"
+row() { # peers_dir scene_file options...
+  local peers=$1 src=$2; shift 2
+  local name; name=$(basename "${src%.*}")
+  local f="$OUT/$name.dlgs" sog spz start end
+  sog=$(peer "$peers" "$name" sog); spz=$(peer "$peers" "$name" spz)
+  start=$(date +%s.%N); $DLGS encode "$src" -o "$f" "$@" > /dev/null; end=$(date +%s.%N)
+  read -r p s <<< "$(metric "$src" "$f")"
+  read -r sp ss <<< "$(metric "$src" "$peers/$name.sog.ply")"
+  local b; b=$(stat -c %s "$f")
+  printf '| %s | `%s` | %s | %.1f %% | %.1f %% | %s (%s) | %s (%s) | %.1f |\n' "$name" "$*" "$b" \
+    "$(echo "100 * $b / $sog" | bc -l)" "$(echo "100 * $b / $spz" | bc -l)" "$p" "$sp" "$s" "$ss" \
+    "$(echo "$end - $start" | bc)"
+}
+row target/peers "$DATA/ply/gs3d-fork_lod3_tile_0_1971_sh3.ply" --quality high --reallocate-bits 4 --shape 0.1
+row target/peers "$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply" --quality high --reallocate-bits 4 --shape 0.1
+row target/peers "$DATA/ply/gs3d-fork_lod2_tile_0_6831_sh3.ply" --quality medium --tiers 0.04
+row target/peers "$DATA/ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply" --quality medium --tiers 0.04
+row target/peers "$DATA/ply/gsplat_DATA_new_22589_sh3.ply" --quality low --reallocate-bits 4 --shape 0.1
+row target/peers "$DATA/ply/v3dg_donut_mipsplatting_45624_sh0.ply" --quality high --bits rotation=8,sh_dc=9 --tiers 0.04
+row target/peers "$DATA/splat/marcelpadilla_plant.splat" --quality medium --reallocate-bits 4 --shape 0.1
+row target/peers-mosaic "$PWD/target/mosaic.ply" --quality medium --tiers 0.15,0.02
+row target/peers-large "$PWD/target/big.ply" --quality high --tiers 0.04 --coarse-rotations 1.5
