@@ -3,7 +3,9 @@
 # smallest dlgs file found at a PSNR at least SOG's, with the exact options, against the SOG and
 # SPZ files of scripts/peers.sh. Prints a markdown table: bytes, % of SOG, % of SPZ, PSNR and
 # SSIM over the 8 orbit cameras of `dlgs compare` (SOG's in brackets), encode seconds.
-# Usage: bash scripts/goal_rows.sh  (~10 min; needs target/peers, target/peers-large and
+# Rows with two tier fractions (`--tiers A,B`) were found by trying a handful of fractions on each
+# scene (BENCHMARKS.md lists them), so they are tuned to these scenes.
+# Usage: bash scripts/goal_rows.sh  (~5 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -32,12 +34,12 @@ row() { # peers_dir scene_file options...
     "$(echo "100 * $b / $sog" | bc -l)" "$(echo "100 * $b / $spz" | bc -l)" "$p" "$sp" "$s" "$ss" \
     "$(echo "$end - $start" | bc)"
 }
-row target/peers "$DATA/ply/gs3d-fork_lod3_tile_0_1971_sh3.ply" --quality high --reallocate-bits 4 --shape 0.1
-row target/peers "$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply" --quality high --reallocate-bits 4 --shape 0.1
-row target/peers "$DATA/ply/gs3d-fork_lod2_tile_0_6831_sh3.ply" --quality medium --tiers 0.04
-row target/peers "$DATA/ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply" --quality medium --tiers 0.04
+row target/peers "$DATA/ply/gs3d-fork_lod3_tile_0_1971_sh3.ply" --quality high --tiers 0.3,0.05
+row target/peers "$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply" --quality high --tiers 0.5,0.2
+row target/peers "$DATA/ply/gs3d-fork_lod2_tile_0_6831_sh3.ply" --quality medium --tiers 0.1,0.01
+row target/peers "$DATA/ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply" --quality medium --tiers 0.06,0.006
 row target/peers "$DATA/ply/gsplat_DATA_new_22589_sh3.ply" --quality low --reallocate-bits 4 --shape 0.1
 row target/peers "$DATA/ply/v3dg_donut_mipsplatting_45624_sh0.ply" --quality high --bits rotation=8,sh_dc=9 --tiers 0.04
-row target/peers "$DATA/splat/marcelpadilla_plant.splat" --quality medium --reallocate-bits 4 --shape 0.1
+row target/peers "$DATA/splat/marcelpadilla_plant.splat" --quality high --tiers 0.3,0.07
 row target/peers-mosaic "$PWD/target/mosaic.ply" --quality medium --tiers 0.15,0.02
 row target/peers-large "$PWD/target/big.ply" --quality high --tiers 0.04 --coarse-rotations 1.5
