@@ -427,6 +427,7 @@ pub fn encode_file(
         )?;
         spinner.finish_and_clear();
         std::io::Write::flush(&mut out)?;
+        drop(out);
         pending.commit()?;
         if verbose {
             println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
