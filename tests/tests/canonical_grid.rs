@@ -207,18 +207,24 @@ fn statics_are_sorted_dynamics_keep_their_order() {
     }
 }
 
-#[test]
-fn degenerate_gaussians_decode_finite_and_nan_is_rejected() {
+/// The lod3 tile with its first 50 Gaussians degenerate (zero quaternions, collapsed e^-30 and
+/// huge e^12 scales, opacity saturated both ways) and a constant channel (every x equal).
+fn degenerate_lod3() -> Gaussians {
     let mut g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     for i in 0..50 {
         g.rotations[i] = [0.0; 4];
         g.log_scales[i] = [if i % 2 == 0 { -30.0 } else { 12.0 }; 3];
         g.opacity[i] = if i % 2 == 0 { -1e4 } else { 1e4 };
     }
-    // A constant channel: every x equal.
     for p in &mut g.positions {
         p[0] = 0.25;
     }
+    g
+}
+
+#[test]
+fn degenerate_gaussians_decode_finite_and_nan_is_rejected() {
+    let g = degenerate_lod3();
     let d = round_trip(&Canonical::from_static(g.clone()), &QuantBits::LOW).statics;
     assert!(d.positions.iter().all(|p| p[0] == 0.25));
     for v in [
@@ -1051,15 +1057,7 @@ fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
 fn degenerate_gaussians_decode_finite_in_coarse_rotation_sets() {
     // Layout 3: collapsed (e^-30) and huge (e^12) scales give the largest and the smallest
     // shift; a zero quaternion still decodes near the identity, within its coarsened step.
-    let mut g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
-    for i in 0..50 {
-        g.rotations[i] = [0.0; 4];
-        g.log_scales[i] = [if i % 2 == 0 { -30.0 } else { 12.0 }; 3];
-        g.opacity[i] = if i % 2 == 0 { -1e4 } else { 1e4 };
-    }
-    for p in &mut g.positions {
-        p[0] = 0.25; // a constant channel
-    }
+    let g = degenerate_lod3();
     let parts = [(g.clone(), QuantBits::LOW)];
     let empty = Gaussians::new(g.sh_degree, 0);
     let gop = sorted_grid::PartedGop {
