@@ -317,10 +317,16 @@ pub fn zero_on_level(lo: f32, hi: f32, bits: u8) -> (f32, f32) {
     };
     let step = step_at(m);
     // f32 rounding must not narrow the range below the data.
-    (
+    let widened = (
         ((-m * step) as f32).min(lo),
         (((l64 - m) * step) as f32).max(hi),
-    )
+    );
+    // Near f32::MAX the widened ends overflow: stored ranges must be finite (§6.5.2).
+    if widened.0.is_finite() && widened.1.is_finite() {
+        widened
+    } else {
+        (lo, hi)
+    }
 }
 
 /// Of two ranges, the one with the lower estimated rate-distortion cost for `v` (ties: `a`):
@@ -1442,6 +1448,8 @@ mod tests {
         assert_eq!(zero_on_level(-0.9, -0.2, 8), (-0.9, -0.2));
         assert_eq!(zero_on_level(0.0, 0.0, 8), (0.0, 0.0));
         assert_eq!(zero_on_level(-1.0, 1.0, 1), (-1.0, 1.0));
+        // Ends that would overflow f32 keep the data's range.
+        assert_eq!(zero_on_level(-f32::MAX, f32::MAX, 8), (-f32::MAX, f32::MAX));
     }
 
     #[test]
