@@ -263,10 +263,11 @@ pub fn robust_radius(positions: &[[f32; 3]]) -> Option<f32> {
     (r > 0.0 && r.is_finite()).then_some(r)
 }
 
-/// Quantisation range: fixed for opacities, rotation components and the index; the data's
-/// min/max otherwise (log-scales: raised to `max - LOG_SCALE_SPAN` and to
-/// `ln(radius) - LOG_SCALE_BELOW_RADIUS`, never above the max).
-fn range(k: Kind, v: &[f32], radius: Option<f32>) -> (f32, f32) {
+/// Quantisation range at `bits`: fixed for opacities, rotation components and the index; the
+/// data's min/max otherwise (log-scales: raised to `max - LOG_SCALE_SPAN` and to
+/// `ln(radius) - LOG_SCALE_BELOW_RADIUS`, never above the max; SH bands 1-3: widened to put a
+/// level at zero where that is cheaper, [`zero_on_level`]).
+fn range(k: Kind, v: &[f32], radius: Option<f32>, bits: u8) -> (f32, f32) {
     let min_max = || {
         v.iter()
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &x| {
@@ -286,6 +287,10 @@ fn range(k: Kind, v: &[f32], radius: Option<f32>) -> (f32, f32) {
             let floor = radius.map_or(f32::NEG_INFINITY, |r| r.ln() - LOG_SCALE_BELOW_RADIUS);
             (lo.max(hi - LOG_SCALE_SPAN).max(floor.min(hi)), hi)
         }
+        Kind::Sh(j) if j >= 3 => {
+            let (lo, hi) = min_max();
+            cheaper_range(v, (lo, hi), zero_on_level(lo, hi, bits), bits)
+        }
         _ => min_max(),
     }
 }
@@ -297,7 +302,7 @@ fn range(k: Kind, v: &[f32], radius: Option<f32>) -> (f32, f32) {
 /// ([`cheaper_range`]): real gsplat at `low`, 7 % fewer bytes at the same PSNR; fruit at its
 /// presets, no change (BENCHMARKS.md "SH bands"). Ranges not around zero, and 1-bit channels,
 /// are returned as they are.
-pub fn zero_on_level(lo: f32, hi: f32, bits: u8) -> (f32, f32) {
+fn zero_on_level(lo: f32, hi: f32, bits: u8) -> (f32, f32) {
     let l = levels(bits);
     if !(lo < 0.0 && hi > 0.0) || l < 2.0 {
         return (lo, hi);
@@ -333,6 +338,9 @@ pub fn zero_on_level(lo: f32, hi: f32, bits: u8) -> (f32, f32) {
 /// squared error plus `λ` times the order-0 entropy of the levels, `λ = 2 ln 2 / 12 · step²`
 /// (the slope of uniform quantisation at high rate: one bit more quarters the error `step²/12`).
 fn cheaper_range(v: &[f32], a: (f32, f32), b: (f32, f32), bits: u8) -> (f32, f32) {
+    if a == b {
+        return a;
+    }
     let cost = |(lo, hi): (f32, f32)| -> f64 {
         let mut counts = vec![0u32; 1 << bits];
         let mut sse = 0.0;
@@ -488,11 +496,7 @@ pub fn quantise_set(g: &Gaussians, bits: &QuantBits) -> QuantisedSet {
         .map(|k| {
             let v = values(g, k);
             let b = k.bits(bits);
-            let (lo, hi) = range(k, &v, radius);
-            let (lo, hi) = match k {
-                Kind::Sh(j) if j >= 3 => cheaper_range(&v, (lo, hi), zero_on_level(lo, hi, b), b),
-                _ => (lo, hi),
-            };
+            let (lo, hi) = range(k, &v, radius, b);
             (
                 b,
                 lo,
