@@ -65,6 +65,11 @@ pub struct CodecArgs {
     /// never reach the 1/255 alpha at which 3DGS compositing starts, so no pixel changes.
     #[arg(long)]
     pub keep_invisible: bool,
+    /// Keep the input's SH degree. By default a lossy still scene is stored only up to the
+    /// highest SH band that holds a non-zero coefficient (the gs3d tiles declare degree 3 with
+    /// bands 1-3 zero everywhere): zero bands add nothing to any colour, so no pixel changes.
+    #[arg(long)]
+    pub keep_sh_degree: bool,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
     /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
@@ -308,6 +313,7 @@ impl CodecArgs {
             },
             canonical_orientation: !self.keep_orientation,
             drop_invisible: !self.keep_invisible,
+            trim_zero_sh_bands: !self.keep_sh_degree,
             reallocate_bits: self.reallocate_bits,
             shape_tolerance: self.shape,
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
@@ -435,6 +441,12 @@ pub fn encode_file(
                 println!(
                     "  left out {} Gaussians no renderer draws (opacity below 1/255; --keep-invisible keeps them)",
                     report.dropped_invisible
+                );
+            }
+            if report.sh_degree < g.sh_degree {
+                println!(
+                    "  stored SH degree {}: the bands above it are zero in every Gaussian (--keep-sh-degree keeps them)",
+                    report.sh_degree
                 );
             }
             if let Some(a) = report.allocation {

@@ -12,6 +12,7 @@ pub mod importance;
 pub mod invisible;
 pub mod orientation;
 pub mod synth;
+pub mod zero_bands;
 
 use std::io::Write;
 
@@ -164,6 +165,9 @@ pub struct EncoderConfig {
     /// Lossy (`CSOG`) still scenes: leave out the Gaussians no renderer draws (both opacities
     /// below 1/255, [`invisible`]). No pixel changes.
     pub drop_invisible: bool,
+    /// Lossy (`CSOG`) still scenes: store SH only up to the highest band that holds a non-zero
+    /// coefficient ([`zero_bands`]). No pixel changes.
+    pub trim_zero_sh_bands: bool,
     /// Lossy (`CSOG`) still scenes: choose each level by estimated bits plus error weighted by
     /// the Gaussian's importance over this tolerance ([`importance`]), so Gaussians that add
     /// little to any image take levels that code smaller; 0 = nearest levels. Larger = smaller
@@ -203,6 +207,7 @@ impl Default for EncoderConfig {
             canonical_orientation: true,
             reallocate_bits: 0,
             drop_invisible: true,
+            trim_zero_sh_bands: true,
             shape_tolerance: 0.0,
             tier_weights: Vec::new(),
             octree_positions: true,
@@ -552,6 +557,9 @@ pub struct StillReport {
     pub allocation: Option<bit_allocation::Allocation>,
     /// Gaussians left out because no renderer draws them ([`EncoderConfig::drop_invisible`]).
     pub dropped_invisible: usize,
+    /// The SH degree stored: below the input's when [`EncoderConfig::trim_zero_sh_bands`]
+    /// left out zero bands.
+    pub sh_degree: u8,
 }
 
 /// [`encode_still`], also reporting what the encoder chose.
@@ -569,6 +577,13 @@ pub fn encode_still_reporting<W: Write>(
     } else {
         (g, 0)
     };
+    let trimmed;
+    let g = if lossy && cfg.trim_zero_sh_bands && zero_bands::degree_in_use(g) < g.sh_degree {
+        trimmed = g.with_sh_degree(zero_bands::degree_in_use(g));
+        &trimmed
+    } else {
+        g
+    };
     let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     if g.has_language() {
         // DLGStream's 9-dim feature is 3 levels x 3 dims; other widths are one level.
@@ -585,6 +600,7 @@ pub fn encode_still_reporting<W: Write>(
     let report = StillReport {
         allocation: enc.allocation().cloned(),
         dropped_invisible,
+        sh_degree: g.sh_degree,
     };
     Ok((enc.finish()?, report))
 }

@@ -933,17 +933,23 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
         order.extend(local.into_iter().map(|i| i + start as u32));
         start += g.len();
     }
-    out.put_u8(1);
-    out.put_u32(gop.dynamics.len() as u32);
-    encode_set(
-        &mut out,
-        gop.dynamics,
-        gop.dynamic_bits,
-        zstd_level,
-        None,
-        false,
-        None,
-    );
+    if gop.dynamics.is_empty() {
+        // Since 1.12 an empty set is no parts: a part's set record would carry every channel's
+        // record (837 bytes in all at SH 3) to say nothing.
+        out.put_u8(0);
+    } else {
+        out.put_u8(1);
+        out.put_u32(gop.dynamics.len() as u32);
+        encode_set(
+            &mut out,
+            gop.dynamics,
+            gop.dynamic_bits,
+            zstd_level,
+            None,
+            false,
+            None,
+        );
+    }
     Ok((out, order))
 }
 
@@ -1257,7 +1263,7 @@ fn octree_cells(t: &OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
 }
 
 /// A set stored as parts (layout 1): a part count, then per part its Gaussian count and its
-/// set record; the counts must add up to `n`.
+/// set record; the counts must add up to `n`. An empty set may have no parts (since 1.12).
 fn decode_parts(
     r: &mut ByteReader,
     n: usize,
@@ -1268,8 +1274,11 @@ fn decode_parts(
 ) -> Result<Gaussians> {
     let at = r.offset();
     let parts = r.u8("CSOG part count")? as usize;
-    if !(1..=MAX_PARTS).contains(&parts) {
-        return Err(bad_at(format!("{parts} parts (1..={MAX_PARTS})"), at));
+    if parts > MAX_PARTS || (parts == 0 && n > 0) {
+        return Err(bad_at(
+            format!("{parts} parts for {n} Gaussians (1..={MAX_PARTS}; 0 only for none)"),
+            at,
+        ));
     }
     let mut g = Gaussians::new(sh_degree, lang_width);
     let mut left = n;

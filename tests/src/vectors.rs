@@ -490,6 +490,8 @@ fn csog(
         tier_weights,
         octree_positions,
         rotation_coarsening,
+        // lod3's bands 1-3 are zero everywhere; the vectors keep their channel records.
+        trim_zero_sh_bands: false,
         ..Default::default()
     };
     dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()

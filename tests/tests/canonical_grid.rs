@@ -536,6 +536,53 @@ fn never_drawn_gaussians_are_left_out_without_changing_a_pixel() {
 }
 
 #[test]
+fn sh_bands_that_are_zero_everywhere_are_left_out_without_changing_a_pixel() {
+    // Real gs3d lod3 tile: declared SH 3, every band 1-3 coefficient 0.0.
+    let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    assert_eq!(g.sh_degree, 3);
+    assert_eq!(dlgs_encoder::zero_bands::degree_in_use(&g), 0);
+    let encode = |trim: bool| {
+        let cfg = EncoderConfig {
+            canonical: CanonicalCodec::Sorted {
+                bits: QuantBits::HIGH,
+                sort: SortSpec::DEFAULT,
+            },
+            trim_zero_sh_bands: trim,
+            ..Default::default()
+        };
+        let (bytes, report) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
+        let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
+        assert_eq!(dec.scene().sh_degree, report.sh_degree);
+        (bytes.len(), dec.gop_canonical(0).unwrap().statics.clone())
+    };
+    let (kept_bytes, kept) = encode(false);
+    let (trimmed_bytes, trimmed) = encode(true);
+    println!("SH 3 kept {kept_bytes} B, trimmed to SH 0 {trimmed_bytes} B");
+    assert_eq!((kept.sh_degree, trimmed.sh_degree), (3, 0));
+    // 45 band channel records of at least 14 bytes each are gone; nothing else changes.
+    assert!(
+        kept_bytes >= trimmed_bytes + 45 * 14,
+        "{kept_bytes} vs {trimmed_bytes}"
+    );
+    assert_eq!(trimmed.positions, kept.positions);
+    assert_eq!(trimmed.log_scales, kept.log_scales);
+    assert_eq!(trimmed.rotations, kept.rotations);
+    assert_eq!(trimmed.opacity, kept.opacity);
+    assert_eq!(trimmed.sh, kept.with_sh_degree(0).sh);
+    let spec = OrbitSpec {
+        width: 320,
+        height: 240,
+        count: 3,
+        ..Default::default()
+    };
+    for cam in orbit_cameras(&g, &spec) {
+        let a = render(&kept, &cam, &RenderOptions::default()).unwrap();
+        let b = render(&trimmed, &cam, &RenderOptions::default()).unwrap();
+        assert_eq!(a.color, b.color, "camera {}", cam.name);
+    }
+}
+
+#[test]
 fn shaped_levels_stay_near_their_values_and_shrink_a_real_sh3_scene() {
     // Real SuperSplat fruit (4,721 Gaussians, SH 3): the importance-weighted shaper may move a
     // level up to MAX_MOVE steps; measured at 1352x1014 it codes a third smaller for 1.4 dB.
@@ -746,6 +793,25 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
     let mut b = p.clone();
     b[0] = 4;
     assert!(err(&b).contains("layout version 4"), "{}", err(&b));
+    // Since 1.12 the empty dynamic set is its part count alone, 0; a scene that declares
+    // dynamic Gaussians cannot have none.
+    assert_eq!(p.last(), Some(&0));
+    let mut dynamic = scene.clone();
+    dynamic.n_dynamic = 1;
+    let e = sorted_grid::decode(&p, 0, &dynamic, &Limits::default()).unwrap_err();
+    assert!(e.to_string().contains("0 parts for 1 Gaussians"), "{e}");
+    // The 1.11 form of the same set (one part of 0 Gaussians, every channel record) still
+    // decodes.
+    let mut old = p[..p.len() - 1].to_vec();
+    old.push(1);
+    old.extend_from_slice(&0u32.to_le_bytes());
+    let empty = Gaussians::new(c.statics.sh_degree, 0);
+    let with_part =
+        sorted_grid::encode(&Canonical::from_static(empty), &QuantBits::HIGH, 3).unwrap();
+    // Layout 0's payload is the layout byte, the (empty) static set, the (empty) dynamic set.
+    old.extend_from_slice(&with_part[1..1 + (with_part.len() - 1) / 2]);
+    let back = sorted_grid::decode(&old, 0, &scene, &Limits::default()).unwrap();
+    assert_eq!((back.statics.len(), back.dynamics.len()), (1971, 0));
 }
 
 #[test]
