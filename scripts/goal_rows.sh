@@ -5,7 +5,9 @@
 # SSIM over the 8 orbit cameras of `dlgs compare` (SOG's in brackets), encode seconds.
 # Rows with two tier fractions (`--tiers A,B`) were found by trying a handful of fractions on each
 # scene (BENCHMARKS.md lists them), so they are tuned to these scenes.
-# Usage: bash scripts/goal_rows.sh  (~5 min; needs target/peers, target/peers-large and
+# TARGET=1: instead of those options, each scene is coded with `--target-psnr <SOG's PSNR on the
+# benchmark views>`: the encoder's own search, on views of its own (BENCHMARKS.md "Target PSNR").
+# Usage: bash scripts/goal_rows.sh  (~5 min, TARGET=1 ~25 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,9 +28,10 @@ row() { # peers_dir scene_file options...
   local name; name=$(basename "${src%.*}")
   local f="$OUT/$name.dlgs" sog spz start end
   sog=$(peer "$peers" "$name" sog); spz=$(peer "$peers" "$name" spz)
+  read -r sp ss <<< "$(metric "$src" "$peers/$name.sog.ply")"
+  if [ "${TARGET:-0}" = 1 ]; then set -- --target-psnr "$sp"; fi
   start=$(date +%s.%N); $DLGS encode "$src" -o "$f" "$@" > /dev/null; end=$(date +%s.%N)
   read -r p s <<< "$(metric "$src" "$f")"
-  read -r sp ss <<< "$(metric "$src" "$peers/$name.sog.ply")"
   local b; b=$(stat -c %s "$f")
   printf '| %s | `%s` | %s | %.1f %% | %.1f %% | %s (%s) | %s (%s) | %.1f |\n' "$name" "$*" "$b" \
     "$(echo "100 * $b / $sog" | bc -l)" "$(echo "100 * $b / $spz" | bc -l)" "$p" "$sp" "$s" "$ss" \

@@ -96,6 +96,18 @@ pub struct CodecArgs {
         default_value = "0"
     )]
     pub tiers: Vec<f64>,
+    /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
+    /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
+    /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
+    /// bits one group at a time, and keeps the smallest at or above DB. If none gets there, the
+    /// scene is stored lossless. Replaces --quality, --bits, --tiers, --shape and --reallocate-bits;
+    /// 15-60 candidates, 6-90 s on the real scenes (BENCHMARKS.md "Target PSNR").
+    #[arg(
+        long,
+        value_name = "DB",
+        conflicts_with_all = ["quality", "bits", "tiers", "shape", "reallocate_bits"]
+    )]
+    pub target_psnr: Option<f64>,
     /// Store raw canonical floats without zstd.
     #[arg(long)]
     pub no_zstd: bool,
@@ -243,6 +255,12 @@ impl CodecArgs {
     }
 
     pub fn config(&self, meta: serde_json::Value) -> Result<EncoderConfig> {
+        if self.target_psnr.is_some() {
+            bail!(
+                "--target-psnr searches the settings of a still scene (PLY, .splat, SPZ input); \
+                 give --quality (and --bits, --tiers) for this input"
+            );
+        }
         if !(self.shape.is_finite() && self.shape >= 0.0) {
             bail!("--shape takes a tolerance >= 0, got {}", self.shape);
         }
@@ -317,6 +335,7 @@ impl CodecArgs {
             reallocate_bits: self.reallocate_bits,
             shape_tolerance: self.shape,
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
+            importance: None,
             octree_positions: !self.grid_positions,
             rotation_coarsening: match self.coarse_rotations {
                 None if self.grid_positions => None,
@@ -399,6 +418,83 @@ pub fn run_encode(
     report(input, in_size, output, frames)
 }
 
+/// `--target-psnr`: the smallest candidate of [`dlgs_encoder::quality_search`] reaching
+/// `target` dB on the search's views, or the lossless file when none does.
+fn encode_to_target(
+    g: &dlgs::Gaussians,
+    target: f64,
+    codec: &CodecArgs,
+    meta: serde_json::Value,
+    out: &mut impl std::io::Write,
+    verbose: bool,
+) -> Result<()> {
+    use dlgs_encoder::quality_search::smallest_at;
+    if !(target.is_finite() && target > 0.0) {
+        bail!("--target-psnr takes a PSNR in dB > 0, got {target}");
+    }
+    let base = CodecArgs {
+        target_psnr: None,
+        ..codec.clone()
+    };
+    let cfg = base.config(meta)?;
+    let bar = if verbose {
+        ProgressBar::new_spinner().with_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed}] {pos} candidates; {msg}",
+            )
+            .expect("a valid template"),
+        )
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_message("measuring importance (36 renders)");
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let found = smallest_at(g, target, &cfg, |t| {
+        bar.inc(1);
+        bar.set_message(format!(
+            "{} tiers {:?}: {} B, {:.2} dB",
+            t.label, t.tiers, t.bytes, t.psnr
+        ));
+    })?;
+    bar.finish_and_clear();
+    if verbose {
+        println!("target {target:.2} dB on the search's 12 views:");
+        let width = found.trials.iter().map(|t| t.label.len()).max().unwrap_or(0);
+        for (i, t) in found.trials.iter().enumerate() {
+            let mark = if found.best.as_ref().is_some_and(|b| b.0 == i) {
+                "  <- chosen"
+            } else {
+                ""
+            };
+            println!(
+                "  {:<width$} --tiers {:<12} {:>10} B  {:6.2} dB{mark}",
+                t.label,
+                t.tiers
+                    .iter()
+                    .map(|f| f.to_string())
+                    .collect::<Vec<_>>()
+                    .join(","),
+                t.bytes,
+                t.psnr
+            );
+        }
+    }
+    match found.best {
+        Some((_, file)) => out.write_all(&file)?,
+        None => {
+            if verbose {
+                println!("  no candidate reaches {target:.2} dB: storing the scene lossless");
+            }
+            let lossless = EncoderConfig {
+                canonical: CanonicalCodec::Raw,
+                ..cfg
+            };
+            dlgs_encoder::encode_still(g, lossless, out)?;
+        }
+    }
+    Ok(())
+}
+
 /// Encode `input` (a splat scene, or a `.dlgs` to re-encode) into `output`; returns the
 /// number of frames. `verbose`: progress bar and a line for still scenes.
 pub fn encode_file(
@@ -414,6 +510,13 @@ pub fn encode_file(
     if !is_dlgs(input) {
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
+        if let Some(target) = codec.target_psnr {
+            encode_to_target(&g, target, codec, meta(input, settings), &mut out, verbose)?;
+            std::io::Write::flush(&mut out)?;
+            drop(out);
+            pending.commit()?;
+            return Ok(1);
+        }
         let spinner =
             if verbose && (codec.reallocate_bits > 0 || codec.shape > 0.0 || codec.tiered()) {
                 let s = ProgressBar::new_spinner().with_message(if codec.reallocate_bits > 0 {

@@ -349,3 +349,62 @@ fn a_failed_encode_leaves_no_file_and_an_in_place_re_encode_reads_its_input_firs
     dlgs(&["verify", out_s]);
     assert_eq!(listing(), ["x.dlgs"]);
 }
+
+#[test]
+fn target_psnr_keeps_the_smallest_candidate_at_the_target_or_stores_lossless() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data(SCENE);
+    let scene = scene.to_str().unwrap();
+    let out = tmp.path().join("target.dlgs");
+    let out = out.to_str().unwrap();
+    let text = dlgs(&["encode", scene, "-o", out, "--target-psnr", "45"]);
+    // Every candidate is listed with its bytes and PSNR on the search's views; the chosen one
+    // reaches 45 dB and no candidate that reaches it is smaller.
+    let trials: Vec<(u64, f64, bool)> = text
+        .lines()
+        .filter(|l| l.trim_end().ends_with("dB") || l.contains("<- chosen"))
+        .filter_map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            let b = w.iter().position(|&x| x == "B")?;
+            Some((
+                w[b - 1].parse().ok()?,
+                w[b + 1].parse().ok()?,
+                l.contains("<- chosen"),
+            ))
+        })
+        .collect();
+    assert!(trials.len() >= 6, "{text}");
+    let chosen: Vec<_> = trials.iter().filter(|t| t.2).collect();
+    assert_eq!(chosen.len(), 1, "{text}");
+    let (bytes, psnr, _) = *chosen[0];
+    assert!(psnr >= 45.0, "{text}");
+    assert!(trials.iter().all(|t| t.1 < 45.0 || t.0 >= bytes), "{text}");
+    assert_eq!(std::fs::metadata(out).unwrap().len(), bytes);
+    // The benchmark's views (other cameras) land near the target too.
+    let cmp = dlgs(&["compare", scene, out, "--json", "--orbit", "4"]);
+    let bench: f64 = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+        .as_f64()
+        .unwrap();
+    assert!(bench > 43.0, "{bench} dB");
+    // Out of reach of every preset: the scene is stored lossless.
+    let text = dlgs(&["encode", scene, "-o", out, "--target-psnr", "150"]);
+    assert!(text.contains("storing the scene lossless"), "{text}");
+    let cmp = dlgs(&["compare", scene, out, "--json", "--orbit", "2"]);
+    assert!(cmp.contains("inf") || cmp.contains("null"), "{cmp}");
+    for (args, says) in [
+        (
+            vec!["--target-psnr", "45", "--quality", "high"],
+            "cannot be used with",
+        ),
+        (
+            vec!["--target-psnr", "45", "--tiers", "0.1"],
+            "cannot be used with",
+        ),
+        (vec!["--target-psnr", "0"], "> 0"),
+    ] {
+        let mut a = vec!["encode", scene, "-o", out];
+        a.extend(&args);
+        let err = dlgs_fails(&a);
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}

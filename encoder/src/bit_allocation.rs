@@ -20,7 +20,7 @@ use dlgs_render::{metrics, orbit_cameras, render, Camera, OrbitSpec, RenderOptio
 
 /// Attribute groups whose bits are moved (language is not rendered in colour and keeps its
 /// bits).
-const GROUPS: [&str; 7] = [
+pub(crate) const GROUPS: [&str; 7] = [
     "position",
     "log_scale",
     "rotation",
@@ -30,12 +30,24 @@ const GROUPS: [&str; 7] = [
     "sh_high",
 ];
 
-fn get(b: &QuantBits, g: &str) -> u8 {
+/// The [`GROUPS`] a scene of `g`'s SH degree has.
+pub(crate) fn groups_of(g: &Gaussians) -> Vec<&'static str> {
+    GROUPS
+        .into_iter()
+        .filter(|&n| match n {
+            "sh_rest" => g.sh_degree >= 1,
+            "sh_high" => g.sh_degree >= 2,
+            _ => true,
+        })
+        .collect()
+}
+
+pub(crate) fn get(b: &QuantBits, g: &str) -> u8 {
     let mut b = *b;
     *b.field_mut(g).expect("a group name")
 }
 
-fn with(b: &QuantBits, g: &str, v: u8) -> QuantBits {
+pub(crate) fn with(b: &QuantBits, g: &str, v: u8) -> QuantBits {
     let mut b = *b;
     *b.field_mut(g).expect("a group name") = v;
     b
@@ -147,14 +159,7 @@ pub fn reallocate(
         octree,
         coarsening,
     };
-    let groups: Vec<&'static str> = GROUPS
-        .into_iter()
-        .filter(|&n| match n {
-            "sh_rest" => g.sh_degree >= 1,
-            "sh_high" => g.sh_degree >= 2,
-            _ => true,
-        })
-        .collect();
+    let groups = groups_of(g);
     let (start_bytes, start_psnr) = judge.score(&start)?;
     let (mut bits, mut bytes, mut psnr) = (start, start_bytes, start_psnr);
     let mut moves = Vec::new();

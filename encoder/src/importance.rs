@@ -51,7 +51,7 @@ pub fn shaping_weights(blend: &[f64], tolerance: f64) -> Vec<f32> {
 
 /// Shaping weight per Gaussian of `g` for `tolerance` (> 0).
 pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
-    shaping_weights(&contributions(g, &importance_views(g)), tolerance)
+    shaping_weights(&blend_weights(g), tolerance)
 }
 
 /// Split a still scene's static set into parts (layout 1) by importance: `fractions[j]`
@@ -60,18 +60,25 @@ pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
 /// fraction go to the later part). The most important Gaussians are the first part, at `bits`.
 /// With `grid_sort`, each part is grid-sorted on its own; empty parts are left out. Also returns
 /// the parts' order (indices into `g`).
+/// Each Gaussian's blending weight summed over [`importance_views`].
+pub fn blend_weights(g: &Gaussians) -> Vec<f64> {
+    contributions(g, &importance_views(g))
+}
+
+/// `blend`: [`blend_weights`] of `g`.
 pub fn tiers(
     g: &Gaussians,
+    blend: &[f64],
     fractions: &[f64],
     sort: SortSpec,
     bits: QuantBits,
     grid_sort: bool,
 ) -> (Vec<(Gaussians, QuantBits)>, Vec<u32>) {
-    let blend = contributions(g, &importance_views(g));
+    assert_eq!(blend.len(), g.len(), "one blending weight per Gaussian");
     // Tier of each Gaussian: how many of the fractions it falls under.
     let mut tier = vec![0usize; g.len()];
     for &f in fractions {
-        for i in least_weight(&blend, f) {
+        for i in least_weight(blend, f) {
             tier[i as usize] += 1;
         }
     }

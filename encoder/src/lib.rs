@@ -11,6 +11,7 @@ pub mod grid_sort;
 pub mod importance;
 pub mod invisible;
 pub mod orientation;
+pub mod quality_search;
 pub mod synth;
 pub mod zero_bands;
 
@@ -179,6 +180,12 @@ pub struct EncoderConfig {
     /// §6.5.2, [`importance::tiers`]); empty = one part. When set, `shape_tolerance` is not
     /// applied (the CLI refuses both).
     pub tier_weights: Vec<f64>,
+    /// With `tier_weights`: the static Gaussians' blending weights as
+    /// [`importance::blend_weights`] measures them on the set the encoder codes (after
+    /// [`prepare_still`] and, with `canonical_orientation`, [`orientation`]); `None` (or a
+    /// length that does not match) = measure them. Lets a search code one scene many times
+    /// without 36 renders each ([`quality_search`]).
+    pub importance: Option<std::sync::Arc<[f64]>>,
     /// `CSOG`: code the static set's positions as an octree and store it in the order readers
     /// derive from them (layout 2, §6.5.5) instead of as grid channels in the encoder's sort
     /// order (layouts 0 and 1). 13-14 % fewer position bytes on the real scenes; the grid sort
@@ -210,6 +217,7 @@ impl Default for EncoderConfig {
             trim_zero_sh_bands: true,
             shape_tolerance: 0.0,
             tier_weights: Vec::new(),
+            importance: None,
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
         }
@@ -433,7 +441,15 @@ impl<W: Write> StreamEncoder<W> {
                 }
                 let (parts, order) = if first && still && !self.cfg.tier_weights.is_empty() {
                     // Each part is sorted on its own: that order is the one stored.
-                    importance::tiers(statics, &self.cfg.tier_weights, sort, bits, !octree)
+                    let measured;
+                    let blend = match &self.cfg.importance {
+                        Some(b) if b.len() == statics.len() => b,
+                        _ => {
+                            measured = importance::blend_weights(statics);
+                            &measured[..]
+                        }
+                    };
+                    importance::tiers(statics, blend, &self.cfg.tier_weights, sort, bits, !octree)
                 } else {
                     (vec![(sorted.statics, bits)], order)
                 };
@@ -550,6 +566,30 @@ pub fn encode_still<W: Write>(g: &dlgs::Gaussians, cfg: EncoderConfig, out: W) -
     encode_still_reporting(g, cfg, out).map(|(w, _)| w)
 }
 
+/// What a lossy still scene loses before coding, by `cfg`: the Gaussians no renderer draws
+/// ([`invisible`]) and the SH bands that are zero everywhere ([`zero_bands`]); neither changes a
+/// pixel. `None` when nothing changes; also the number of Gaussians left out.
+pub fn prepare_still(g: &dlgs::Gaussians, cfg: &EncoderConfig) -> (Option<dlgs::Gaussians>, usize) {
+    let lossy = matches!(cfg.canonical, CanonicalCodec::Sorted { .. });
+    let mut out = None;
+    let mut dropped = 0;
+    if lossy && cfg.drop_invisible {
+        let (kept, n) = invisible::drop_never_drawn(g);
+        if n > 0 {
+            out = Some(kept);
+            dropped = n;
+        }
+    }
+    if lossy && cfg.trim_zero_sh_bands {
+        let cur = out.as_ref().unwrap_or(g);
+        let used = zero_bands::degree_in_use(cur);
+        if used < cur.sh_degree {
+            out = Some(cur.with_sh_degree(used));
+        }
+    }
+    (out, dropped)
+}
+
 /// What [`encode_still_reporting`] did besides coding.
 #[derive(Debug, Clone, Default)]
 pub struct StillReport {
@@ -568,22 +608,8 @@ pub fn encode_still_reporting<W: Write>(
     cfg: EncoderConfig,
     out: W,
 ) -> Result<(W, StillReport)> {
-    let lossy = matches!(cfg.canonical, CanonicalCodec::Sorted { .. });
-    let pruned;
-    let (g, dropped_invisible) = if lossy && cfg.drop_invisible {
-        let (kept, dropped) = invisible::drop_never_drawn(g);
-        pruned = kept;
-        (&pruned, dropped)
-    } else {
-        (g, 0)
-    };
-    let trimmed;
-    let g = if lossy && cfg.trim_zero_sh_bands && zero_bands::degree_in_use(g) < g.sh_degree {
-        trimmed = g.with_sh_degree(zero_bands::degree_in_use(g));
-        &trimmed
-    } else {
-        g
-    };
+    let (prepared, dropped_invisible) = prepare_still(g, &cfg);
+    let g = prepared.as_ref().unwrap_or(g);
     let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     if g.has_language() {
         // DLGStream's 9-dim feature is 3 levels x 3 dims; other widths are one level.
