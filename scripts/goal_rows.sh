@@ -7,7 +7,7 @@
 # scene (BENCHMARKS.md lists them), so they are tuned to these scenes.
 # TARGET=1: instead of those options, each scene is coded with `--target-psnr <SOG's PSNR on the
 # benchmark views>`: the encoder's own search, on views of its own (BENCHMARKS.md "Target PSNR").
-# Usage: bash scripts/goal_rows.sh  (~5 min, TARGET=1 ~25 min; needs target/peers, target/peers-large and
+# Usage: bash scripts/goal_rows.sh  (~5 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."

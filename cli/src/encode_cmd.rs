@@ -101,7 +101,7 @@ pub struct CodecArgs {
     /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
     /// bits one group at a time, and keeps the smallest at or above DB. If none gets there, the
     /// scene is stored lossless. Replaces --quality, --bits, --tiers, --shape and --reallocate-bits;
-    /// 15-60 candidates, 6-90 s on the real scenes (BENCHMARKS.md "Target PSNR").
+    /// 25-150 s on the real scenes, 280 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
     #[arg(
         long,
         value_name = "DB",
@@ -459,7 +459,12 @@ fn encode_to_target(
     bar.finish_and_clear();
     if verbose {
         println!("target {target:.2} dB on the search's 12 views:");
-        let width = found.trials.iter().map(|t| t.label.len()).max().unwrap_or(0);
+        let width = found
+            .trials
+            .iter()
+            .map(|t| t.label.len())
+            .max()
+            .unwrap_or(0);
         for (i, t) in found.trials.iter().enumerate() {
             let mark = if found.best.as_ref().is_some_and(|b| b.0 == i) {
                 "  <- chosen"

@@ -493,36 +493,56 @@ fn bit_reallocation_buys_quality_within_the_presets_bytes() {
     assert!(bytes.len() >= a.bytes && bytes.len() < a.bytes + 4096);
 }
 
-#[test]
-fn never_drawn_gaussians_are_left_out_without_changing_a_pixel() {
-    // Real Mip-Splatting donut (45,624 Gaussians), 3.3 % of them with opacity below 1/255.
-    let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
-    let (kept, dropped) = dlgs_encoder::invisible::drop_never_drawn(&g);
-    assert_eq!(dropped, 1518, "measured on the donut");
+/// Three small orbit views (of `a`'s bounds) render the same pixels from `a` and `b`.
+fn assert_same_pixels(a: &Gaussians, b: &Gaussians) {
     let spec = OrbitSpec {
         width: 320,
         height: 240,
         count: 3,
         ..Default::default()
     };
-    for cam in orbit_cameras(&g, &spec) {
-        let a = render(&g, &cam, &RenderOptions::default()).unwrap();
-        let b = render(&kept, &cam, &RenderOptions::default()).unwrap();
-        assert_eq!(a.color, b.color, "camera {}", cam.name);
+    for cam in orbit_cameras(a, &spec) {
+        let ia = render(a, &cam, &RenderOptions::default()).unwrap();
+        let ib = render(b, &cam, &RenderOptions::default()).unwrap();
+        assert_eq!(ia.color, ib.color, "camera {}", cam.name);
     }
+}
+
+/// `g` through [`dlgs_encoder::encode_still_reporting`] at `bits` with the rest of `cfg`:
+/// file bytes, report and decoded static set (checked against the header's SH degree).
+fn still_file(
+    g: &Gaussians,
+    bits: QuantBits,
+    cfg: EncoderConfig,
+) -> (usize, dlgs_encoder::StillReport, Gaussians) {
+    let cfg = EncoderConfig {
+        canonical: CanonicalCodec::Sorted {
+            bits,
+            sort: SortSpec::DEFAULT,
+        },
+        ..cfg
+    };
+    let (bytes, report) = dlgs_encoder::encode_still_reporting(g, cfg, Vec::new()).unwrap();
+    let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
+    assert_eq!(dec.scene().sh_degree, report.sh_degree);
+    let statics = dec.gop_canonical(0).unwrap().statics.clone();
+    (bytes.len(), report, statics)
+}
+
+#[test]
+fn never_drawn_gaussians_are_left_out_without_changing_a_pixel() {
+    // Real Mip-Splatting donut (45,624 Gaussians), 3.3 % of them with opacity below 1/255.
+    let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
+    let (kept, dropped) = dlgs_encoder::invisible::drop_never_drawn(&g);
+    assert_eq!(dropped, 1518, "measured on the donut");
+    assert_same_pixels(&g, &kept);
     let encode = |drop_invisible: bool| {
         let cfg = EncoderConfig {
-            canonical: CanonicalCodec::Sorted {
-                bits: QuantBits::MEDIUM,
-                sort: SortSpec::DEFAULT,
-            },
             drop_invisible,
             ..Default::default()
         };
-        let (bytes, report) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
-        let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
-        let n = dec.gop_canonical(0).unwrap().statics.len();
-        (bytes.len(), report.dropped_invisible, n)
+        let (bytes, report, statics) = still_file(&g, QuantBits::MEDIUM, cfg);
+        (bytes, report.dropped_invisible, statics.len())
     };
     let (all_bytes, none_dropped, all_n) = encode(false);
     let (pruned_bytes, pruned, pruned_n) = encode(true);
@@ -543,17 +563,11 @@ fn sh_bands_that_are_zero_everywhere_are_left_out_without_changing_a_pixel() {
     assert_eq!(dlgs_encoder::zero_bands::degree_in_use(&g), 0);
     let encode = |trim: bool| {
         let cfg = EncoderConfig {
-            canonical: CanonicalCodec::Sorted {
-                bits: QuantBits::HIGH,
-                sort: SortSpec::DEFAULT,
-            },
             trim_zero_sh_bands: trim,
             ..Default::default()
         };
-        let (bytes, report) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
-        let mut dec = Decoder::new(Cursor::new(bytes.as_slice()), Limits::default()).unwrap();
-        assert_eq!(dec.scene().sh_degree, report.sh_degree);
-        (bytes.len(), dec.gop_canonical(0).unwrap().statics.clone())
+        let (bytes, _, statics) = still_file(&g, QuantBits::HIGH, cfg);
+        (bytes, statics)
     };
     let (kept_bytes, kept) = encode(false);
     let (trimmed_bytes, trimmed) = encode(true);
@@ -569,17 +583,7 @@ fn sh_bands_that_are_zero_everywhere_are_left_out_without_changing_a_pixel() {
     assert_eq!(trimmed.rotations, kept.rotations);
     assert_eq!(trimmed.opacity, kept.opacity);
     assert_eq!(trimmed.sh, kept.with_sh_degree(0).sh);
-    let spec = OrbitSpec {
-        width: 320,
-        height: 240,
-        count: 3,
-        ..Default::default()
-    };
-    for cam in orbit_cameras(&g, &spec) {
-        let a = render(&kept, &cam, &RenderOptions::default()).unwrap();
-        let b = render(&trimmed, &cam, &RenderOptions::default()).unwrap();
-        assert_eq!(a.color, b.color, "camera {}", cam.name);
-    }
+    assert_same_pixels(&kept, &trimmed);
 }
 
 #[test]
