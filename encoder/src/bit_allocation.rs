@@ -93,19 +93,22 @@ struct Judge {
     coarsening: Option<RotationCoarsening>,
 }
 
+/// `g` rendered from each camera: one colour image per view.
+pub(crate) fn render_views(g: &Gaussians, cams: &[Camera]) -> Result<Vec<Vec<f32>>> {
+    cams.iter()
+        .map(|cam| {
+            render(g, cam, &RenderOptions::default())
+                .map(|img| img.color)
+                .map_err(|e| {
+                    dlgs::Error::new(dlgs::ErrorKind::InvalidInput(format!("rendering: {e}")), 0)
+                })
+        })
+        .collect()
+}
+
 /// All views of `g`, one after the other.
 fn images(g: &Gaussians, cams: &[Camera]) -> Result<Vec<f32>> {
-    let mut out = Vec::new();
-    for cam in cams {
-        let img = render(g, cam, &RenderOptions::default()).map_err(|e| {
-            dlgs::Error::new(
-                dlgs::ErrorKind::InvalidInput(format!("bit allocation: {e}")),
-                0,
-            )
-        })?;
-        out.extend(img.color);
-    }
-    Ok(out)
+    Ok(render_views(g, cams)?.concat())
 }
 
 impl Judge {

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use dlgs::container::{ChunkType, FileReader};
 use dlgs::payload::sorted_grid::{self, QuantBits};
 use dlgs::{Gaussians, Limits, Result};
-use dlgs_render::{metrics, orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
+use dlgs_render::{metrics, orbit_cameras, Camera, OrbitSpec};
 
 use crate::{
     bit_allocation, importance, orientation, prepare_still, CanonicalCodec, EncoderConfig,
@@ -90,21 +90,6 @@ pub fn search_views(g: &Gaussians) -> Vec<Camera> {
     cams
 }
 
-fn images(g: &Gaussians, cams: &[Camera]) -> Result<Vec<Vec<f32>>> {
-    cams.iter()
-        .map(|cam| {
-            render(g, cam, &RenderOptions::default())
-                .map(|img| img.color)
-                .map_err(|e| {
-                    dlgs::Error::new(
-                        dlgs::ErrorKind::InvalidInput(format!("quality search: {e}")),
-                        0,
-                    )
-                })
-        })
-        .collect()
-}
-
 fn mean_psnr(reference: &[Vec<f32>], decoded: &[Vec<f32>]) -> f64 {
     let sum: f64 = reference
         .iter()
@@ -137,7 +122,8 @@ pub fn smallest_at(
         CanonicalCodec::Sorted { sort, .. } => sort,
         CanonicalCodec::Raw => crate::SortSpec::DEFAULT,
     };
-    let lossy = EncoderConfig {
+    // Every candidate is `base` with its own bits and tiers, without the other searches.
+    let base = EncoderConfig {
         canonical: CanonicalCodec::Sorted {
             bits: QuantBits::HIGH,
             sort,
@@ -147,7 +133,7 @@ pub fn smallest_at(
         ..base.clone()
     };
     // The tiers' blending weights, measured once on the set the encoder codes.
-    let (prepared, _) = prepare_still(g, &lossy);
+    let (prepared, _) = prepare_still(g, &base);
     let coded = prepared.as_ref().unwrap_or(g);
     let oriented = base
         .canonical_orientation
@@ -159,10 +145,10 @@ pub fn smallest_at(
         // The groups the coded set has (bands that are zero everywhere are not stored).
         groups: bit_allocation::groups_of(coded),
         target_db,
-        base: lossy,
+        base,
         sort,
         blend,
-        reference: images(g, &cams)?,
+        reference: bit_allocation::render_views(g, &cams)?,
         cams,
         trials: Vec::new(),
         best: None,
@@ -227,7 +213,10 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             bits,
             tiers: tiers.to_vec(),
             bytes: file.len(),
-            psnr: mean_psnr(&self.reference, &images(&decoded, &self.cams)?),
+            psnr: mean_psnr(
+                &self.reference,
+                &bit_allocation::render_views(&decoded, &self.cams)?,
+            ),
         };
         (self.progress)(&trial);
         self.trials.push(trial);
@@ -250,7 +239,6 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             .filter(|&i| self.trials[i].psnr < self.target_db && self.beats_best(i))
             .collect();
         below.sort_by(|&a, &b| self.trials[b].psnr.total_cmp(&self.trials[a].psnr));
-        let groups = self.groups.clone();
         for start in below.into_iter().take(REFINE_STARTS) {
             let mut at = start;
             for _ in 0..REFINE_STEPS {
@@ -258,18 +246,10 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
                     break;
                 }
                 let mut up = None;
-                for &grp in &groups {
-                    let t = &self.trials[at];
-                    let v = bit_allocation::get(&t.bits, grp);
-                    if v >= 16 {
+                for grp in self.groups.clone() {
+                    let Some(c) = self.nudge(at, grp, 1)? else {
                         continue;
-                    }
-                    let (label, bits, tiers) = (
-                        format!("{} +{grp}", t.label),
-                        bit_allocation::with(&t.bits, grp, v + 1),
-                        t.tiers.clone(),
-                    );
-                    let c = self.code(label, bits, &tiers)?;
+                    };
                     let (t, ct) = (&self.trials[at], &self.trials[c]);
                     let gain = (ct.psnr - t.psnr) / (ct.bytes as f64 - t.bytes as f64).max(1.0);
                     if up.is_none_or(|(_, best_gain)| gain > best_gain) {
@@ -288,22 +268,31 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
         Ok(())
     }
 
+    /// Trial `at` with group `grp` one bit finer (`delta` 1) or coarser (-1), coded if new;
+    /// `None` outside 1..=16 bits.
+    fn nudge(&mut self, at: usize, grp: &'static str, delta: i8) -> Result<Option<usize>> {
+        let t = &self.trials[at];
+        let v = bit_allocation::get(&t.bits, grp) as i8 + delta;
+        if !(1..=16).contains(&v) {
+            return Ok(None);
+        }
+        let sign = if delta > 0 { '+' } else { '-' };
+        let (label, bits, tiers) = (
+            format!("{} {sign}{grp}", t.label),
+            bit_allocation::with(&t.bits, grp, v as u8),
+            t.tiers.clone(),
+        );
+        self.code(label, bits, &tiers).map(Some)
+    }
+
     /// From trial `at` (at the target), take a bit from each group in turn where the file
     /// stays at the target, and again until no group can spare one.
     fn spare_bits(&mut self, mut at: usize) -> Result<()> {
         let start = at;
         for grp in self.groups.clone() {
-            let t = &self.trials[at];
-            let v = bit_allocation::get(&t.bits, grp);
-            if v <= 1 {
+            let Some(c) = self.nudge(at, grp, -1)? else {
                 continue;
-            }
-            let (label, bits, tiers) = (
-                format!("{} -{grp}", t.label),
-                bit_allocation::with(&t.bits, grp, v - 1),
-                t.tiers.clone(),
-            );
-            let c = self.code(label, bits, &tiers)?;
+            };
             if self.trials[c].psnr >= self.target_db && self.trials[c].bytes < self.trials[at].bytes
             {
                 at = c;
@@ -365,8 +354,8 @@ mod tests {
         // The kept file is the candidate measured: decoding it again gives the same PSNR.
         let cams = search_views(&g);
         let again = mean_psnr(
-            &images(&g, &cams).unwrap(),
-            &images(&decode_still(&file).unwrap(), &cams).unwrap(),
+            &bit_allocation::render_views(&g, &cams).unwrap(),
+            &bit_allocation::render_views(&decode_still(&file).unwrap(), &cams).unwrap(),
         );
         assert_eq!(again, best.psnr);
         // Every tier set was tried, each from the coarsest preset.
