@@ -92,7 +92,7 @@ pub fn all() -> Vec<Vector> {
         name: "lod3-csog-tiered",
         bytes: csog(&lod3, vec![0.1, 0.02], false, None),
         error: None,
-        about: "the lod3 scene as CSOG layout 1 (since 1.8, grid positions): preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser and those holding 2 % two bits coarser, three parts",
+        about: "the lod3 scene as CSOG layout 1 (since 1.8, grid positions): preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser and those holding 2 % two bits coarser, three parts; the empty dynamic set as 0 parts (since 1.12)",
     });
     v.push(Vector {
         name: "lod3-csog-octree",
