@@ -33,6 +33,9 @@ struct Info {
     scene_chunks: BTreeMap<String, u64>,
     chunk_bytes_by_type: BTreeMap<String, u64>,
     index_bytes: u64,
+    /// The `META` chunk (informative JSON: encoder, options that differ from the defaults,
+    /// source file); a string when it is not valid JSON.
+    meta: Option<serde_json::Value>,
     /// How GOP 0 codes its time features (`TFEA` codec, §6.2), when the scene has dynamics.
     time_features: Option<String>,
     gops: Vec<GopRow>,
@@ -56,9 +59,16 @@ fn collect(path: &Path) -> Result<Info> {
     let scene = r.scene().clone();
     let mut by_type: BTreeMap<String, u64> = BTreeMap::new();
     let mut scene_chunks = BTreeMap::new();
-    for c in r.scene_chunks() {
+    let mut meta = None;
+    for c in r.scene_chunks().to_vec() {
         *scene_chunks.entry(c.ty.to_string()).or_insert(0) += c.len;
         *by_type.entry(c.ty.to_string()).or_insert(0) += c.len;
+        if c.ty == dlgs::container::ChunkType::META && meta.is_none() {
+            let p = r.payload(&c)?;
+            meta = Some(serde_json::from_slice(&p).unwrap_or_else(|_| {
+                serde_json::Value::String(String::from_utf8_lossy(&p).into_owned())
+            }));
+        }
     }
     let mut time_features = None;
     let mut gops = Vec::new();
@@ -100,6 +110,7 @@ fn collect(path: &Path) -> Result<Info> {
         scene_chunks,
         chunk_bytes_by_type: by_type,
         index_bytes: r.index_bytes(),
+        meta,
         time_features,
         gops,
     })
@@ -136,6 +147,9 @@ pub fn run_info(path: &Path, json: bool) -> Result<()> {
     );
     if let Some(t) = &info.time_features {
         println!("  time features: {t}");
+    }
+    if let Some(m) = &info.meta {
+        println!("  META: {m}");
     }
     println!(
         "  bytes per frame: {:.1} ({:.2} KiB)",

@@ -14,7 +14,7 @@ pub fn run_ingest(inputs: &[PathBuf], output: &Path, codec: &CodecArgs, fps: u32
     let pb = bar(dirs.len() as u64, "reading");
     let gops = run::read_run(&dirs, |g| pb.set_position(g as u64 + 1))?;
     pb.finish_and_clear();
-    let settings = serde_json::json!(format!("{codec:?}"));
+    let settings = codec.changed_settings();
     let meta = serde_json::json!({
         "source": "DLGStream reference implementation output (fdsd / 3DGS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),

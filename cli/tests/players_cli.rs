@@ -238,6 +238,17 @@ fn encode_with_tiers_and_seek_with_a_gop_cache() {
         .as_f64()
         .unwrap();
     assert!(psnr > 40.0, "{psnr} dB");
+    // META records only the options that differ from their defaults.
+    let info: serde_json::Value = serde_json::from_str(&dlgs(&["info", out, "--json"])).unwrap();
+    assert_eq!(
+        info["meta"]["settings"],
+        serde_json::json!({"quality": "medium", "tiers": [0.1, 0.02]}),
+        "{info}"
+    );
+    assert!(
+        info["scene_chunks"]["META"].as_u64().unwrap() < 200,
+        "{info}"
+    );
     for (args, says) in [
         (vec!["--tiers", "0.01,0.1"], "must not increase"),
         (vec!["--tiers", "1.5"], "[0, 1)"),
