@@ -185,7 +185,27 @@ fn numbered(path: &std::path::Path, i: usize, n: usize) -> PathBuf {
     path.with_file_name(format!("{stem}_{i:02}.{ext}"))
 }
 
+/// `dlgs compare ... | head`: once the reader has gone, printing fails with a broken pipe and
+/// `println!` panics. Rust ignores SIGPIPE, which would end a C tool quietly; this does the
+/// same (exit status 141 = 128 + SIGPIPE, as a shell reports it) without a backtrace.
+fn quiet_on_broken_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.contains("failed printing to stdout") && msg.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        default(info);
+    }));
+}
+
 fn main() -> Result<()> {
+    quiet_on_broken_pipe();
     let cli = Cli::parse();
     match cli.cmd {
         Cmd::Info { file, json } => info::run_info(&file, json),

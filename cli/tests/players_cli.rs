@@ -419,3 +419,22 @@ fn target_psnr_keeps_the_smallest_candidate_at_the_target_or_stores_lossless() {
         assert!(err.contains(says), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn a_reader_that_goes_away_ends_the_output_quietly() {
+    // `dlgs compare ... | head -0`: the pipe's reader is closed before dlgs prints. Printing then
+    // fails with a broken pipe; dlgs must stop with status 141 (128 + SIGPIPE), not a panic.
+    let scene = dlgs_tests::data(SCENE);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dlgs"))
+        .args(["compare", scene.to_str().unwrap(), scene.to_str().unwrap()])
+        .args(["--orbit", "2"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(141), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
