@@ -511,7 +511,15 @@ fn encode_to_target(
         }
     }
     match found.best {
-        Some((_, file)) => out.write_all(&file)?,
+        Some((i, file)) => {
+            if verbose {
+                println!(
+                    "  the same file from options: {}",
+                    found.trials[i].options(&found.groups)
+                );
+            }
+            out.write_all(&file)?
+        }
         None => {
             if verbose {
                 println!("  no candidate reaches {target:.2} dB: storing the scene lossless");

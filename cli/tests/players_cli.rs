@@ -391,6 +391,22 @@ fn target_psnr_keeps_the_smallest_candidate_at_the_target_or_stores_lossless() {
     assert!(psnr >= 45.0, "{text}");
     assert!(trials.iter().all(|t| t.1 < 45.0 || t.0 >= bytes), "{text}");
     assert_eq!(std::fs::metadata(out).unwrap().len(), bytes);
+    // The options printed for the chosen file code the same Gaussians (only META differs).
+    let options = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("the same file from options: "))
+        .unwrap_or_else(|| panic!("{text}"));
+    let again = tmp.path().join("again.dlgs");
+    let again = again.to_str().unwrap();
+    let mut a = vec!["encode", scene, "-o", again];
+    a.extend(options.split_whitespace());
+    dlgs(&a);
+    let ply = |f: &str| {
+        let p = format!("{f}.ply");
+        dlgs(&["decode", f, "-o", &p]);
+        std::fs::read(p).unwrap()
+    };
+    assert!(ply(out) == ply(again), "{options}");
     // The benchmark's views (other cameras) land near the target too.
     let cmp = dlgs(&["compare", scene, out, "--json", "--orbit", "4"]);
     let bench: f64 = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]

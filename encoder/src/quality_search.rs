@@ -57,6 +57,23 @@ pub struct Trial {
     pub psnr: f64,
 }
 
+impl Trial {
+    /// The `dlgs encode` options that code this candidate (`--bits` for each of `groups`,
+    /// `--tiers`).
+    pub fn options(&self, groups: &[&str]) -> String {
+        let bits: Vec<String> = groups
+            .iter()
+            .map(|&g| format!("{g}={}", bit_allocation::get(&self.bits, g)))
+            .collect();
+        let mut o = format!("--bits {}", bits.join(","));
+        if !self.tiers.is_empty() {
+            let f: Vec<String> = self.tiers.iter().map(|f| f.to_string()).collect();
+            o += &format!(" --tiers {}", f.join(","));
+        }
+        o
+    }
+}
+
 /// What the search found.
 #[derive(Debug, Clone)]
 pub struct Found {
@@ -64,6 +81,8 @@ pub struct Found {
     pub trials: Vec<Trial>,
     /// The smallest trial reaching the target, and its file; `None` when none does.
     pub best: Option<(usize, Vec<u8>)>,
+    /// The attribute groups the coded scene has (for [`Trial::options`]).
+    pub groups: Vec<&'static str>,
 }
 
 /// Refinement: from this many of the closest candidates below the target, ...
@@ -170,6 +189,7 @@ pub fn smallest_at(
     Ok(Found {
         trials: s.trials,
         best: s.best,
+        groups: s.groups,
     })
 }
 
@@ -377,5 +397,22 @@ mod tests {
             .trials
             .iter()
             .any(|t| t.label.starts_with("near-lossless +")));
+    }
+
+    #[test]
+    fn options_name_every_group_and_the_tiers() {
+        let t = Trial {
+            label: "high".into(),
+            bits: QuantBits::HIGH,
+            tiers: vec![0.3, 0.05],
+            bytes: 0,
+            psnr: 0.0,
+        };
+        assert_eq!(
+            t.options(&["position", "log_scale", "sh_dc"]),
+            "--bits position=14,log_scale=8,sh_dc=8 --tiers 0.3,0.05"
+        );
+        let plain = Trial { tiers: vec![], ..t };
+        assert_eq!(plain.options(&["opacity"]), "--bits opacity=8");
     }
 }
