@@ -88,7 +88,7 @@ pub struct CodecArgs {
     /// of its own), which together hold at most FRACTION of the total weight, as a second grid
     /// one bit coarser in every group (format-spec §6.5.2, layout 1). More fractions, each
     /// smaller, add grids 2, 3, .. bits coarser (`0.04,0.004`). 0 = one grid. Costs 36 renders
-    /// at 640x480; not combined with --shape.
+    /// at 640x480. With --shape, every grid is shaped.
     #[arg(
         long,
         value_name = "FRACTION[,FRACTION..]",
@@ -99,9 +99,11 @@ pub struct CodecArgs {
     /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
     /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
     /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
-    /// bits one group at a time, and keeps the smallest at or above DB. If none gets there, the
-    /// scene is stored lossless. Replaces --quality, --bits, --tiers, --shape and --reallocate-bits;
-    /// 25-150 s on the real scenes, 280 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
+    /// bits one group at a time, and keeps the smallest at or above DB; on scenes with SH bands
+    /// above the DC, level shaping (--shape) is searched the same way. If none gets there, the
+    /// scene is stored lossless. Prints the --bits/--tiers/--shape options of the file kept.
+    /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 25-150 s on the
+    /// real scenes, 280 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
     #[arg(
         long,
         value_name = "DB",
@@ -305,9 +307,6 @@ impl CodecArgs {
                 "--tiers: at most {} fractions",
                 dlgs::payload::sorted_grid::MAX_PARTS - 1
             );
-        }
-        if self.tiered() && self.shape > 0.0 {
-            bail!("--tiers and --shape cannot be combined");
         }
         if let Some(f) = self.coarse_rotations {
             if !(f.is_finite() && f >= 0.0) {

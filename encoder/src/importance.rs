@@ -49,9 +49,35 @@ pub fn shaping_weights(blend: &[f64], tolerance: f64) -> Vec<f32> {
         .collect()
 }
 
-/// Shaping weight per Gaussian of `g` for `tolerance` (> 0).
-pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
-    shaping_weights(&blend_weights(g), tolerance)
+/// Shaping weights for a set stored as `parts` ([`tiers`], or one part), in stored order:
+/// `blend[order[k]]` is the blending weight of the `k`-th Gaussian of the parts' concatenation.
+/// A shaping weight prices one squared quantisation step, and a part `t` bits coarser than
+/// the first has steps `2^t` times as large (in positions, which no preset takes below 12
+/// bits, so the difference is exact): its weights are `4^t` times larger for the same error
+/// in value.
+pub fn part_shaping_weights(
+    blend: &[f64],
+    order: &[u32],
+    parts: &[(Gaussians, QuantBits)],
+    tolerance: f64,
+) -> Vec<f32> {
+    let ordered: Vec<f64> = order.iter().map(|&i| blend[i as usize]).collect();
+    let mut w = shaping_weights(&ordered, tolerance);
+    let first = parts.first().map_or(0, |p| p.1.position);
+    let mut start = 0;
+    for (g, b) in parts {
+        let t = first.saturating_sub(b.position) as i32;
+        for x in &mut w[start..start + g.len()] {
+            *x *= 4f32.powi(t);
+        }
+        start += g.len();
+    }
+    w
+}
+
+/// Each Gaussian's blending weight summed over [`importance_views`].
+pub fn blend_weights(g: &Gaussians) -> Vec<f64> {
+    contributions(g, &importance_views(g))
 }
 
 /// Split a still scene's static set into parts (layout 1) by importance: `fractions[j]`
@@ -60,11 +86,6 @@ pub fn weights(g: &Gaussians, tolerance: f64) -> Vec<f32> {
 /// fraction go to the later part). The most important Gaussians are the first part, at `bits`.
 /// With `grid_sort`, each part is grid-sorted on its own; empty parts are left out. Also returns
 /// the parts' order (indices into `g`).
-/// Each Gaussian's blending weight summed over [`importance_views`].
-pub fn blend_weights(g: &Gaussians) -> Vec<f64> {
-    contributions(g, &importance_views(g))
-}
-
 /// `blend`: [`blend_weights`] of `g`.
 pub fn tiers(
     g: &Gaussians,

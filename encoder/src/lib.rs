@@ -177,10 +177,10 @@ pub struct EncoderConfig {
     /// Lossy (`CSOG`) still scenes: the least important static Gaussians (by blending weight
     /// over [`importance::importance_views`]) that together hold at most `tier_weights[j]` of
     /// the total weight are stored in a part `j + 1` bits coarser in every group (layout 1,
-    /// §6.5.2, [`importance::tiers`]); empty = one part. When set, `shape_tolerance` is not
-    /// applied (the CLI refuses both).
+    /// §6.5.2, [`importance::tiers`]); empty = one part. With `shape_tolerance`, every part
+    /// is shaped ([`importance::part_shaping_weights`]).
     pub tier_weights: Vec<f64>,
-    /// With `tier_weights`: the static Gaussians' blending weights as
+    /// With `tier_weights` or `shape_tolerance`: the static Gaussians' blending weights as
     /// [`importance::blend_weights`] measures them on the set the encoder codes (after
     /// [`prepare_still`] and, with `canonical_orientation`, [`orientation`]); `None` (or a
     /// length that does not match) = measure them. Lets a search code one scene many times
@@ -439,22 +439,34 @@ impl<W: Write> StreamEncoder<W> {
                     bits = a.bits;
                     self.allocation = Some(a);
                 }
-                let (parts, order) = if first && still && !self.cfg.tier_weights.is_empty() {
+                let tiered = first && still && !self.cfg.tier_weights.is_empty();
+                let shaped = first && still && self.cfg.shape_tolerance > 0.0;
+                // Blending weights, for tiers and for shaping: given, or measured once.
+                let blend: Option<std::borrow::Cow<[f64]>> =
+                    (tiered || shaped).then(|| match &self.cfg.importance {
+                        Some(b) if b.len() == statics.len() => b[..].into(),
+                        _ => importance::blend_weights(statics).into(),
+                    });
+                let (parts, order) = match &blend {
                     // Each part is sorted on its own: that order is the one stored.
-                    let measured;
-                    let blend = match &self.cfg.importance {
-                        Some(b) if b.len() == statics.len() => b,
-                        _ => {
-                            measured = importance::blend_weights(statics);
-                            &measured[..]
-                        }
-                    };
-                    importance::tiers(statics, blend, &self.cfg.tier_weights, sort, bits, !octree)
-                } else {
-                    (vec![(sorted.statics, bits)], order)
+                    Some(blend) if tiered => importance::tiers(
+                        statics,
+                        blend,
+                        &self.cfg.tier_weights,
+                        sort,
+                        bits,
+                        !octree,
+                    ),
+                    _ => (vec![(sorted.statics, bits)], order),
                 };
-                let weights = (first && still && self.cfg.shape_tolerance > 0.0)
-                    .then(|| importance::weights(&parts[0].0, self.cfg.shape_tolerance));
+                let weights = blend.filter(|_| shaped).map(|blend| {
+                    importance::part_shaping_weights(
+                        &blend,
+                        &order,
+                        &parts,
+                        self.cfg.shape_tolerance,
+                    )
+                });
                 let gop = sorted_grid::PartedGop {
                     static_parts: &parts,
                     static_weight: weights.as_deref(),
@@ -467,12 +479,7 @@ impl<W: Write> StreamEncoder<W> {
                     (payload, stored.iter().map(|&k| order[k as usize]).collect())
                 } else if parts.len() > 1 {
                     (
-                        sorted_grid::encode_parts(
-                            &parts,
-                            &sorted.dynamics,
-                            &bits,
-                            self.cfg.zstd_level,
-                        )?,
+                        sorted_grid::encode_grid_parts(&gop, self.cfg.zstd_level)?,
                         order,
                     )
                 } else {

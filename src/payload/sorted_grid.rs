@@ -862,7 +862,13 @@ pub fn encode_parts(
         dynamic_bits,
         rotation_coarsening: None,
     };
-    Ok(encode_parted(&parts, zstd_level, false)?.0)
+    encode_grid_parts(&parts, zstd_level)
+}
+
+/// [`encode_parts`] from a [`PartedGop`]: with its shaping weights (`rotation_coarsening`
+/// does not apply to grid positions).
+pub fn encode_grid_parts(gop: &PartedGop, zstd_level: i32) -> Result<Vec<u8>> {
+    Ok(encode_parted(gop, zstd_level, false)?.0)
 }
 
 /// A canonical GOP to store as parts (layouts 1, 2 and 3).
