@@ -146,9 +146,10 @@ fn mean_psnr(reference: &[Vec<f32>], decoded: &[Vec<f32>]) -> f64 {
 /// each group that can spare one, as long as one can.
 ///
 /// On scenes with SH bands above the DC, shaping is a move too (one step along
-/// [`SHAPE_LEVELS`], like a bit): after the unshaped search, the best file and the
-/// [`REFINE_STARTS`] closest below the target are coded at every shaping level, and refinement
-/// and sparing run again from there.
+/// [`SHAPE_LEVELS`], like a bit, in refinement and sparing). The presets and tier sets are
+/// coded unshaped, so after the first refinement and sparing the best file and the
+/// [`REFINE_STARTS`] closest below the target are also coded at every shaping level, and
+/// refinement and sparing run again from there.
 /// `progress` sees each trial.
 pub fn smallest_at(
     g: &Gaussians,
