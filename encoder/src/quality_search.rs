@@ -61,7 +61,7 @@ pub struct Trial {
 
 impl Trial {
     /// The `dlgs encode` options that code this candidate (`--bits` for each of `groups`,
-    /// `--tiers`).
+    /// `--tiers`, `--shape`).
     pub fn options(&self, groups: &[&str]) -> String {
         let bits: Vec<String> = groups
             .iter()
