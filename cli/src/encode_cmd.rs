@@ -100,8 +100,9 @@ pub struct CodecArgs {
     /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
     /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
     /// bits one group at a time, and keeps the smallest at or above DB; on scenes with SH bands
-    /// above the DC, level shaping (--shape) is searched the same way. If none gets there, the
-    /// scene is stored lossless. Prints the --bits/--tiers/--shape options of the file kept.
+    /// above the DC, level shaping (--shape) is searched the same way, and with octree
+    /// positions the --coarse-rotations factor (0, 1, 1.5, 2, 3 and the one given). If none
+    /// gets there, the scene is stored lossless. Prints the options of the file kept.
     /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 25-150 s on the
     /// real scenes, 280 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
     #[arg(

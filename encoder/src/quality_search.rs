@@ -15,7 +15,7 @@ use std::io::Cursor;
 use std::sync::Arc;
 
 use dlgs::container::{ChunkType, FileReader};
-use dlgs::payload::sorted_grid::{self, QuantBits};
+use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::{Gaussians, Limits, Result};
 use dlgs_render::{metrics, orbit_cameras, Camera, OrbitSpec};
 
@@ -54,6 +54,8 @@ pub struct Trial {
     pub tiers: Vec<f64>,
     /// The level-shaping tolerance (`--shape`; 0 = nearest levels).
     pub shape: f64,
+    /// The coarse-rotation factor (`--coarse-rotations`; 0 = off).
+    pub rotations: f32,
     pub bytes: usize,
     /// Mean over [`search_views`] of each view's PSNR against the uncompressed scene.
     pub psnr: f64,
@@ -61,7 +63,7 @@ pub struct Trial {
 
 impl Trial {
     /// The `dlgs encode` options that code this candidate (`--bits` for each of `groups`,
-    /// `--tiers`, `--shape`).
+    /// `--tiers`, `--shape`, `--coarse-rotations` unless it is the default).
     pub fn options(&self, groups: &[&str]) -> String {
         let bits: Vec<String> = groups
             .iter()
@@ -74,6 +76,9 @@ impl Trial {
         }
         if self.shape > 0.0 {
             o += &format!(" --shape {}", self.shape);
+        }
+        if self.rotations != RotationCoarsening::DEFAULT.factor {
+            o += &format!(" --coarse-rotations {}", self.rotations);
         }
         o
     }
@@ -92,6 +97,15 @@ pub struct Found {
 
 /// The name of the shaping move among the groups' ([`SHAPE_LEVELS`]).
 const SHAPE: &str = "shape";
+/// The name of the coarse-rotation move ([`ROTATION_FACTORS`]).
+const ROTATIONS: &str = "rotations";
+
+/// The coarse-rotation factors tried (`--coarse-rotations`, format-spec §6.5.6), on sets with
+/// octree positions: a larger factor stores more small Gaussians' rotations coarser. Real lod1
+/// at its `--target-psnr 48.63` bits and tiers: 0 124,405 B at 48.83 dB, 1 (the default)
+/// 120,143 B at 48.63, 1.5 117,542 B at 48.25, 2 115,658 B at 47.80, 3 112,714 B at 46.62
+/// (BENCHMARKS.md "Target PSNR"): a cheaper trade per byte than a bit of most groups.
+pub const ROTATION_FACTORS: [f32; 5] = [0.0, 1.0, 1.5, 2.0, 3.0];
 
 /// The level-shaping tolerances tried (`--shape`), on scenes that store SH bands above the DC
 /// only: there shaping moves band coefficients onto the levels the coder pays least for (real
@@ -146,10 +160,12 @@ fn mean_psnr(reference: &[Vec<f32>], decoded: &[Vec<f32>]) -> f64 {
 /// each group that can spare one, as long as one can.
 ///
 /// On scenes with SH bands above the DC, shaping is a move too (one step along
-/// [`SHAPE_LEVELS`], like a bit, in refinement and sparing). The presets and tier sets are
-/// coded unshaped, so after the first refinement and sparing the best file and the
-/// [`REFINE_STARTS`] closest below the target are also coded at every shaping level, and
-/// refinement and sparing run again from there.
+/// [`SHAPE_LEVELS`], like a bit, in refinement and sparing); so is the coarse-rotation factor
+/// (one step along [`ROTATION_FACTORS`], which also holds `base`'s own factor) when `base`
+/// stores octree positions. The presets and tier sets are coded unshaped at `base`'s factor,
+/// so after the first refinement and sparing the best file and the [`REFINE_STARTS`] closest
+/// below the target are also coded at every shaping level and every factor, and refinement
+/// and sparing run again from there.
 /// `progress` sees each trial.
 pub fn smallest_at(
     g: &Gaussians,
@@ -179,6 +195,14 @@ pub fn smallest_at(
         .then(|| orientation::closest_to_identity(coded));
     let blend: Arc<[f64]> = importance::blend_weights(oriented.as_ref().unwrap_or(coded)).into();
     let cams = search_views(g);
+    let start_factor = base.rotation_coarsening.map_or(0.0, |c| c.factor);
+    // The factors moved through: none but `base`'s without octree positions.
+    let mut factors = vec![start_factor];
+    if base.octree_positions {
+        factors.extend(ROTATION_FACTORS);
+        factors.sort_by(f32::total_cmp);
+        factors.dedup();
+    }
     let mut s = Search {
         g,
         // The groups the coded set has (bands that are zero everywhere are not stored).
@@ -187,6 +211,7 @@ pub fn smallest_at(
         base,
         sort,
         blend,
+        factors,
         reference: bit_allocation::render_views(g, &cams)?,
         cams,
         trials: Vec::new(),
@@ -195,7 +220,7 @@ pub fn smallest_at(
     };
     for tiers in TIER_SETS {
         for (preset, bits) in PRESETS {
-            let t = s.code(preset.to_string(), bits, tiers, 0.0)?;
+            let t = s.code(preset.to_string(), bits, tiers, 0.0, start_factor)?;
             // Finer presets only cost more.
             if s.trials[t].psnr >= target_db || !s.beats_best(t) {
                 break;
@@ -206,14 +231,21 @@ pub fn smallest_at(
     if let Some(b) = s.best.as_ref().map(|b| b.0) {
         s.spare_bits(b)?;
     }
-    if s.shaped() {
+    let seeded = s.shaped() || s.factors.len() > 1;
+    if seeded {
         let mut seeds: Vec<usize> = s.best.iter().map(|b| b.0).collect();
         seeds.extend(s.closest_below());
         for seed in seeds {
-            for &level in &SHAPE_LEVELS[1..] {
-                let t = &s.trials[seed];
-                let (label, bits, tiers) = (shaped_label(&t.label, level), t.bits, t.tiers.clone());
-                s.code(label, bits, &tiers, level)?;
+            let t = s.trials[seed].clone();
+            if s.shaped() {
+                for &level in &SHAPE_LEVELS[1..] {
+                    let label = with_token(&t.label, SHAPE, level);
+                    s.code(label, t.bits, &t.tiers, level, t.rotations)?;
+                }
+            }
+            for f in s.factors.clone() {
+                let label = with_token(&t.label, ROTATIONS, f);
+                s.code(label, t.bits, &t.tiers, t.shape, f)?;
             }
         }
         s.refine()?;
@@ -235,6 +267,8 @@ struct Search<'a, P: FnMut(&Trial)> {
     base: EncoderConfig,
     sort: crate::SortSpec,
     blend: Arc<[f64]>,
+    /// The coarse-rotation factors moved through, ascending.
+    factors: Vec<f32>,
     cams: Vec<Camera>,
     reference: Vec<Vec<f32>>,
     trials: Vec<Trial>,
@@ -244,12 +278,17 @@ struct Search<'a, P: FnMut(&Trial)> {
 
 impl<P: FnMut(&Trial)> Search<'_, P> {
     /// Code, decode and render one candidate; keep its file when it is the new best.
-    fn code(&mut self, label: String, bits: QuantBits, tiers: &[f64], shape: f64) -> Result<usize> {
-        if let Some(i) = self
-            .trials
-            .iter()
-            .position(|t| t.bits == bits && t.tiers == tiers && t.shape == shape)
-        {
+    fn code(
+        &mut self,
+        label: String,
+        bits: QuantBits,
+        tiers: &[f64],
+        shape: f64,
+        rotations: f32,
+    ) -> Result<usize> {
+        if let Some(i) = self.trials.iter().position(|t| {
+            t.bits == bits && t.tiers == tiers && t.shape == shape && t.rotations == rotations
+        }) {
             return Ok(i);
         }
         let cfg = EncoderConfig {
@@ -260,6 +299,10 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             tier_weights: tiers.to_vec(),
             shape_tolerance: shape,
             importance: Some(self.blend.clone()),
+            rotation_coarsening: (rotations > 0.0).then_some(RotationCoarsening {
+                factor: rotations,
+                ..RotationCoarsening::DEFAULT
+            }),
             ..self.base.clone()
         };
         let file = crate::encode_still(self.g, cfg, Vec::new())?;
@@ -269,6 +312,7 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             bits,
             tiers: tiers.to_vec(),
             shape,
+            rotations,
             bytes: file.len(),
             psnr: mean_psnr(
                 &self.reference,
@@ -307,12 +351,16 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
         below
     }
 
-    /// The moves from a trial: a bit in each group, and on [`Self::shaped`] scenes one step of
-    /// shaping ([`SHAPE`]).
+    /// The moves from a trial: a bit in each group, on [`Self::shaped`] scenes one step of
+    /// shaping ([`SHAPE`]), and with octree positions one step of the coarse-rotation factor
+    /// ([`ROTATIONS`]).
     fn moves(&self) -> Vec<&'static str> {
         let mut m = self.groups.clone();
         if self.shaped() {
             m.push(SHAPE);
+        }
+        if self.factors.len() > 1 {
+            m.push(ROTATIONS);
         }
         m
     }
@@ -348,21 +396,29 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
     }
 
     /// Trial `at` with group `grp` one bit finer (`delta` 1) or coarser (-1), or with `grp`
-    /// = [`SHAPE`] one shaping level lower or higher; coded if new. `None` outside 1..=16 bits
-    /// or [`SHAPE_LEVELS`].
+    /// = [`SHAPE`] ([`ROTATIONS`]) one shaping level (factor) lower or higher; coded if new.
+    /// `None` outside 1..=16 bits, [`SHAPE_LEVELS`] or the factors searched.
     fn nudge(&mut self, at: usize, grp: &'static str, delta: i8) -> Result<Option<usize>> {
         let t = &self.trials[at];
-        let (mut bits, mut shape) = (t.bits, t.shape);
+        let (mut bits, mut shape, mut rotations) = (t.bits, t.shape, t.rotations);
+        // One step down a list of levels, finest first (finer = `delta` 1).
+        let step = |levels: &[f64], at: f64| {
+            let i = levels.iter().position(|&l| l == at).unwrap_or(0) as i8 - delta;
+            usize::try_from(i).ok().and_then(|i| levels.get(i)).copied()
+        };
         let label = if grp == SHAPE {
-            let level = SHAPE_LEVELS.iter().position(|&l| l == t.shape).unwrap_or(0) as i8 - delta;
-            let Some(&l) = usize::try_from(level)
-                .ok()
-                .and_then(|i| SHAPE_LEVELS.get(i))
-            else {
+            let Some(l) = step(&SHAPE_LEVELS, t.shape) else {
                 return Ok(None);
             };
             shape = l;
-            shaped_label(&t.label, l)
+            with_token(&t.label, SHAPE, l)
+        } else if grp == ROTATIONS {
+            let factors: Vec<f64> = self.factors.iter().map(|&f| f as f64).collect();
+            let Some(f) = step(&factors, t.rotations as f64) else {
+                return Ok(None);
+            };
+            rotations = f as f32;
+            with_token(&t.label, ROTATIONS, rotations)
         } else {
             let v = bit_allocation::get(&t.bits, grp) as i8 + delta;
             if !(1..=16).contains(&v) {
@@ -373,7 +429,7 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             format!("{} {sign}{grp}", t.label)
         };
         let tiers = t.tiers.clone();
-        self.code(label, bits, &tiers, shape).map(Some)
+        self.code(label, bits, &tiers, shape, rotations).map(Some)
     }
 
     /// From trial `at` (at the target), take a bit from each group in turn where the file
@@ -396,13 +452,14 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
     }
 }
 
-/// `label` with its shaping token (if any) replaced by `shape=level`, last.
-fn shaped_label(label: &str, level: f64) -> String {
+/// `label` with its `key=` token (if any) replaced by `key=value`, last.
+fn with_token(label: &str, key: &str, value: impl std::fmt::Display) -> String {
+    let prefix = format!("{key}=");
     let moves: Vec<&str> = label
         .split(' ')
-        .filter(|w| !w.starts_with("shape="))
+        .filter(|w| !w.starts_with(&prefix))
         .collect();
-    format!("{} shape={level}", moves.join(" "))
+    format!("{} {prefix}{value}", moves.join(" "))
 }
 
 /// The static Gaussians of a still file's `CSOG`, decoded as every reader does.
@@ -526,6 +583,7 @@ mod tests {
             bits: QuantBits::HIGH,
             tiers: vec![0.3, 0.05],
             shape: 0.0,
+            rotations: 1.0,
             bytes: 0,
             psnr: 0.0,
         };
@@ -539,5 +597,45 @@ mod tests {
             ..t
         };
         assert_eq!(plain.options(&["opacity"]), "--bits opacity=8 --shape 0.03");
+        let coarse = Trial {
+            rotations: 1.5,
+            ..plain.clone()
+        };
+        assert_eq!(
+            coarse.options(&["opacity"]),
+            "--bits opacity=8 --shape 0.03 --coarse-rotations 1.5"
+        );
+        let off = Trial {
+            rotations: 0.0,
+            ..plain
+        };
+        assert!(off.options(&[]).ends_with("--coarse-rotations 0"));
+    }
+
+    #[test]
+    fn the_coarse_rotation_factor_is_searched_with_octree_positions_only() {
+        let found = smallest_at(&scene(), 40.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let mut factors: Vec<f32> = found.trials.iter().map(|t| t.rotations).collect();
+        factors.sort_by(f32::total_cmp);
+        factors.dedup();
+        assert_eq!(factors, ROTATION_FACTORS, "every factor is coded (seeds)");
+        for t in &found.trials {
+            assert!(t.label.matches("rotations=").count() <= 1, "{}", t.label);
+        }
+        // The presets start from the given factor.
+        assert!(found.trials[..PRESETS.len()]
+            .iter()
+            .all(|t| t.rotations == RotationCoarsening::DEFAULT.factor));
+        let (i, file) = found.best.expect("a candidate reaches 40 dB");
+        assert!(found.trials[i].psnr >= 40.0);
+        assert_eq!(found.trials[i].bytes, file.len());
+        // Grid positions have no coarse rotations to move.
+        let grid = EncoderConfig {
+            octree_positions: false,
+            rotation_coarsening: None,
+            ..EncoderConfig::default()
+        };
+        let found = smallest_at(&scene(), 40.0, &grid, |_| {}).unwrap();
+        assert!(found.trials.iter().all(|t| t.rotations == 0.0));
     }
 }
