@@ -103,8 +103,8 @@ pub struct CodecArgs {
     /// above the DC, level shaping (--shape) is searched the same way, and with octree
     /// positions the --coarse-rotations factor (0, 1, 1.5, 2, 3 and the one given). If none
     /// gets there, the scene is stored lossless. Prints the options of the file kept.
-    /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 25-150 s on the
-    /// real scenes, 280 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
+    /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 50-380 s on the
+    /// real scenes, 500 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
     #[arg(
         long,
         value_name = "DB",
