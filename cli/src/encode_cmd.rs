@@ -96,6 +96,14 @@ pub struct CodecArgs {
         default_value = "0"
     )]
     pub tiers: Vec<f64>,
+    /// Lossy still scenes: after coding, decode what was stored, fit every Gaussian's colour
+    /// (SH DC) so the decoded scene renders like the source from 36 views of its own (320x240),
+    /// and code the colours again; stored only if 12 other views of its own render closer to
+    /// the source (format unchanged). The colours absorb part of the error of the quantised
+    /// positions, shapes and opacities (BENCHMARKS.md "Colour refit"). Codes the scene twice,
+    /// plus the fit.
+    #[arg(long, conflicts_with = "target_psnr")]
+    pub refit_colours: bool,
     /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
     /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
     /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
@@ -363,6 +371,7 @@ impl CodecArgs {
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
             importance: None,
             octree_positions: !self.grid_positions,
+            refit_colours: self.refit_colours,
             rotation_coarsening: match self.coarse_rotations {
                 None if self.grid_positions => None,
                 None => Some(RotationCoarsening::DEFAULT),
@@ -556,18 +565,24 @@ pub fn encode_file(
             pending.commit()?;
             return Ok(1);
         }
-        let spinner =
-            if verbose && (codec.reallocate_bits > 0 || codec.shape > 0.0 || codec.tiered()) {
-                let s = ProgressBar::new_spinner().with_message(if codec.reallocate_bits > 0 {
-                    "reallocating bits (coding and rendering candidates)"
-                } else {
-                    "measuring importance (36 renders)"
-                });
-                s.enable_steady_tick(std::time::Duration::from_millis(200));
-                s
+        let spinner = if verbose
+            && (codec.reallocate_bits > 0
+                || codec.shape > 0.0
+                || codec.tiered()
+                || codec.refit_colours)
+        {
+            let s = ProgressBar::new_spinner().with_message(if codec.reallocate_bits > 0 {
+                "reallocating bits (coding and rendering candidates)"
+            } else if codec.refit_colours {
+                "refitting colours (coding twice, fitting on 36 renders, judging on 12)"
             } else {
-                ProgressBar::hidden()
-            };
+                "measuring importance (36 renders)"
+            });
+            s.enable_steady_tick(std::time::Duration::from_millis(200));
+            s
+        } else {
+            ProgressBar::hidden()
+        };
         let (_, report) = dlgs_encoder::encode_still_reporting(
             &g,
             codec.config(meta(input, settings))?,
@@ -601,6 +616,14 @@ pub fn encode_file(
                 println!(
                     "  bits {:?}: {} -> {} bytes, {:.2} -> {:.2} dB on the allocation views",
                     a.bits, a.start_bytes, a.bytes, a.start_psnr, a.psnr
+                );
+            }
+            if let Some(r) = report.refit {
+                println!(
+                    "  colour refit {}: {:.2} -> {:.2} dB on the encoder's held-out views",
+                    if r.kept { "stored" } else { "not stored" },
+                    r.before_db,
+                    r.after_db
                 );
             }
         }

@@ -7,6 +7,7 @@
 //! (`TFEA`, 12-bit HEVC or exact) and the deformation decoders (`MLPW`).
 
 pub mod bit_allocation;
+pub mod colour_refit;
 pub mod grid_sort;
 pub mod importance;
 pub mod invisible;
@@ -195,6 +196,10 @@ pub struct EncoderConfig {
     /// step to move their surface by `factor` position steps up to `max_shift` bits coarser
     /// (layout 3, §6.5.6); `None` = every rotation at its group's bits (layout 2).
     pub rotation_coarsening: Option<RotationCoarsening>,
+    /// Lossy (`CSOG`) still scenes: fit the stored colours to what the rest decodes to
+    /// ([`colour_refit`]), kept only if the encoder's held-out views render closer to the
+    /// source. Codes the scene twice, plus the fit.
+    pub refit_colours: bool,
 }
 
 impl Default for EncoderConfig {
@@ -220,9 +225,14 @@ impl Default for EncoderConfig {
             importance: None,
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
+            refit_colours: false,
         }
     }
 }
+
+/// Codes a canonical GOP's static parts: the `CSOG` payload and, per decoded static Gaussian,
+/// its index in the parts' concatenation.
+type CodeParts<'a> = dyn Fn(&[(dlgs::Gaussians, QuantBits)]) -> Result<(Vec<u8>, Vec<u32>)> + 'a;
 
 /// Writes one GOP at a time, in order.
 pub struct StreamEncoder<W: Write> {
@@ -237,6 +247,18 @@ pub struct StreamEncoder<W: Write> {
     static_order: Option<Vec<u32>>,
     /// What [`bit_allocation::reallocate`] chose for GOP 0, when it ran.
     allocation: Option<bit_allocation::Allocation>,
+    /// What the colour refit measured, when it ran.
+    refit: Option<RefitReport>,
+}
+
+/// The colour refit's judgement ([`EncoderConfig::refit_colours`]): mean PSNR against the
+/// source over [`colour_refit::holdout_views`], without and with the refit colours.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefitReport {
+    pub before_db: f64,
+    pub after_db: f64,
+    /// Whether the refit coding was stored (it rendered closer).
+    pub kept: bool,
 }
 
 impl<W: Write> StreamEncoder<W> {
@@ -278,6 +300,7 @@ impl<W: Write> StreamEncoder<W> {
             first: None,
             static_order: None,
             allocation: None,
+            refit: None,
         })
     }
 
@@ -467,40 +490,92 @@ impl<W: Write> StreamEncoder<W> {
                         self.cfg.shape_tolerance,
                     )
                 });
-                let gop = sorted_grid::PartedGop {
-                    static_parts: &parts,
-                    static_weight: weights.as_deref(),
-                    dynamics: &sorted.dynamics,
-                    dynamic_bits: &bits,
-                    rotation_coarsening: self.cfg.rotation_coarsening,
-                };
-                let (payload, order) = if octree {
-                    let (payload, stored) = sorted_grid::encode_octree(&gop, self.cfg.zstd_level)?;
-                    (payload, stored.iter().map(|&k| order[k as usize]).collect())
-                } else if parts.len() > 1 {
-                    (
-                        sorted_grid::encode_grid_parts(&gop, self.cfg.zstd_level)?,
-                        order,
-                    )
-                } else {
-                    let sorted = Canonical {
-                        statics: parts.into_iter().next().expect("one part").0,
-                        dynamics: sorted.dynamics,
+                let zstd_level = self.cfg.zstd_level;
+                let coarsening = self.cfg.rotation_coarsening;
+                // The payload of `parts`, and per decoded static Gaussian its index in the
+                // parts' concatenation.
+                let code = |parts: &[(dlgs::Gaussians, QuantBits)]| -> Result<(Vec<u8>, Vec<u32>)> {
+                    let gop = sorted_grid::PartedGop {
+                        static_parts: parts,
+                        static_weight: weights.as_deref(),
+                        dynamics: &sorted.dynamics,
+                        dynamic_bits: &bits,
+                        rotation_coarsening: coarsening,
                     };
-                    let payload = sorted_grid::encode_shaped(
-                        &sorted,
-                        &bits,
-                        self.cfg.zstd_level,
-                        weights.as_deref(),
-                    )?;
-                    (payload, order)
+                    let identity = || (0..statics.len() as u32).collect();
+                    Ok(if octree {
+                        sorted_grid::encode_octree(&gop, zstd_level)?
+                    } else if parts.len() > 1 {
+                        (
+                            sorted_grid::encode_grid_parts(&gop, zstd_level)?,
+                            identity(),
+                        )
+                    } else {
+                        let one = Canonical {
+                            statics: parts[0].0.clone(),
+                            dynamics: sorted.dynamics.clone(),
+                        };
+                        let payload = sorted_grid::encode_shaped(
+                            &one,
+                            &bits,
+                            zstd_level,
+                            weights.as_deref(),
+                        )?;
+                        (payload, identity())
+                    })
                 };
+                let (mut payload, mut stored) = code(&parts)?;
+                if first && still && self.cfg.refit_colours {
+                    let refit = self.refit_colours(statics, &parts, &payload, &stored, &code)?;
+                    if let Some(better) = refit {
+                        (payload, stored) = better;
+                    }
+                }
+                let order: Vec<u32> = stored.iter().map(|&k| order[k as usize]).collect();
                 if first {
                     self.static_order = Some(order);
                 }
                 (ChunkType::CSOG, payload)
             }
         })
+    }
+
+    /// [`colour_refit`]: decode `payload` (the coding of `parts`), fit colour offsets to what
+    /// it stores, code the parts again with the refit colours; `Some` (the new payload and
+    /// stored order) only if the held-out views render closer to `source`. Records the
+    /// held-out PSNRs in `self.refit`.
+    fn refit_colours(
+        &mut self,
+        source: &dlgs::Gaussians,
+        parts: &[(dlgs::Gaussians, QuantBits)],
+        payload: &[u8],
+        stored: &[u32],
+        code: &CodeParts<'_>,
+    ) -> Result<Option<(Vec<u8>, Vec<u32>)>> {
+        let limits = dlgs::limits::Limits::default();
+        let scene = self.writer.scene();
+        let decoded = sorted_grid::decode(payload, 0, scene, &limits)?.statics;
+        let offsets = colour_refit::fit(source, &decoded);
+        // Part, and index within it, of each Gaussian of the parts' concatenation.
+        let mut place = Vec::with_capacity(stored.len());
+        for (p, (g, _)) in parts.iter().enumerate() {
+            place.extend((0..g.len()).map(|i| (p, i)));
+        }
+        let mut refit: Vec<(dlgs::Gaussians, QuantBits)> = parts.to_vec();
+        for (k, (&j, &off)) in stored.iter().zip(&offsets).enumerate() {
+            let (p, i) = place[j as usize];
+            colour_refit::set_refit_dc(&mut refit[p].0, i, &decoded, k, off);
+        }
+        let (new_payload, new_stored) = code(&refit)?;
+        let redecoded = sorted_grid::decode(&new_payload, 0, scene, &limits)?.statics;
+        let scores = colour_refit::holdout_psnr(source, &[&decoded, &redecoded]);
+        let kept = scores[1] > scores[0];
+        self.refit = Some(RefitReport {
+            before_db: scores[0],
+            after_db: scores[1],
+            kept,
+        });
+        Ok(kept.then_some((new_payload, new_stored)))
     }
 
     fn dynamic_payloads(
@@ -563,6 +638,11 @@ impl<W: Write> StreamEncoder<W> {
         self.allocation.as_ref()
     }
 
+    /// What the colour refit measured for GOP 0, when it ran.
+    pub fn refit(&self) -> Option<RefitReport> {
+        self.refit
+    }
+
     pub fn finish(self) -> Result<W> {
         self.writer.finish()
     }
@@ -607,6 +687,8 @@ pub struct StillReport {
     /// The SH degree stored: below the input's when [`EncoderConfig::trim_zero_sh_bands`]
     /// left out zero bands.
     pub sh_degree: u8,
+    /// What the colour refit measured, when it ran ([`EncoderConfig::refit_colours`]).
+    pub refit: Option<RefitReport>,
 }
 
 /// [`encode_still`], also reporting what the encoder chose.
@@ -634,6 +716,7 @@ pub fn encode_still_reporting<W: Write>(
         allocation: enc.allocation().cloned(),
         dropped_invisible,
         sh_degree: g.sh_degree,
+        refit: enc.refit(),
     };
     Ok((enc.finish()?, report))
 }

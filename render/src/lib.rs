@@ -7,6 +7,7 @@
 
 pub mod bench_scenes;
 pub mod camera;
+pub mod colour_fit;
 pub mod contribution;
 pub mod fastexp;
 pub mod image_out;
