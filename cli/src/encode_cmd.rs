@@ -101,8 +101,9 @@ pub struct CodecArgs {
     /// and code the colours again; stored only if 12 other views of its own render closer to
     /// the source (format unchanged). The colours absorb part of the error of the quantised
     /// positions, shapes and opacities (BENCHMARKS.md "Colour refit"). Codes the scene twice,
-    /// plus the fit.
-    #[arg(long, conflicts_with = "target_psnr")]
+    /// plus the fit. With --target-psnr: the search's closest candidates below the target are
+    /// also tried with the refit (at most 4, each with the cost above).
+    #[arg(long)]
     pub refit_colours: bool,
     /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
     /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12

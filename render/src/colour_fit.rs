@@ -15,9 +15,9 @@
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::fastexp::exp_neg;
-use crate::project::{project_all, Splat2d, ALPHA_MIN, TILE};
-use crate::raster::{bin_tiles, ALPHA_MAX, T_MIN};
+use crate::contribution::for_each_weight;
+use crate::project::{project_all, Splat2d, TILE};
+use crate::raster::bin_tiles;
 use dlgs::Gaussians;
 
 /// One view's projected Gaussians and tile lists, computed once (the geometry does not move).
@@ -53,38 +53,15 @@ impl View {
     }
 
     /// `visit(slot in list, pixel index in the image, blending weight)` for every pixel a
-    /// splat of tile `i` adds to, by the compositing rule of [`crate::raster`].
+    /// splat of tile `i` adds to ([`for_each_weight`]).
     fn walk_tile(&self, i: usize, mut visit: impl FnMut(usize, usize, f32)) {
-        let (x0, y0, w, h) = self.tile_rect(i);
-        let mut t = [1.0f32; (TILE * TILE) as usize];
-        for (slot, &k) in self.lists[i].iter().enumerate() {
-            let s = &self.splats[k as usize];
-            let [ca, cb, cc] = s.conic;
-            let xs = (s.px[0] as u32).max(x0)..(s.px[2] as u32).min(x0 + w);
-            let ys = (s.px[1] as u32).max(y0)..(s.px[3] as u32).min(y0 + h);
-            for y in ys {
-                let dy = y as f32 - s.mean[1];
-                for x in xs.clone() {
-                    let p = ((y - y0) * TILE + (x - x0)) as usize;
-                    if t[p] < T_MIN {
-                        continue;
-                    }
-                    let dx = x as f32 - s.mean[0];
-                    let power = (-0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy).min(0.0);
-                    let a = (s.opacity * exp_neg(power)).min(ALPHA_MAX);
-                    if a < ALPHA_MIN {
-                        continue;
-                    }
-                    let next = t[p] * (1.0 - a);
-                    if next < T_MIN {
-                        t[p] = 0.0;
-                        continue;
-                    }
-                    visit(slot, (y * self.width + x) as usize, a * t[p]);
-                    t[p] = next;
-                }
-            }
-        }
+        let width = self.width;
+        for_each_weight(
+            &self.splats,
+            &self.lists[i],
+            self.tile_rect(i),
+            |slot, x, y, wgt| visit(slot, (y * width + x) as usize, wgt),
+        );
     }
 
     /// The image `sum_i w_i x_i` (3 channels, no background) of per-Gaussian colours `x`.
@@ -281,22 +258,9 @@ fn norms(v: &[[f64; 3]]) -> [f64; 3] {
 mod tests {
     use super::*;
     use crate::camera::{orbit_cameras, OrbitSpec};
+    use crate::contribution::tests::blob;
     use crate::metrics::psnr;
     use crate::RenderOptions;
-
-    fn blob(n: usize) -> Gaussians {
-        let mut g = Gaussians::new(0, 0);
-        for i in 0..n {
-            let f = i as f32 / n as f32;
-            g.positions
-                .push([f - 0.5, (f * 7.0).sin() * 0.3, (f * 3.0).cos() * 0.3]);
-            g.log_scales.push([-3.0, -3.5, -4.0]);
-            g.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            g.opacity.push(1.0);
-            g.sh.extend_from_slice(&[0.5, 0.2, 0.1]);
-        }
-        g
-    }
 
     fn cams(g: &Gaussians, count: usize) -> Vec<Camera> {
         orbit_cameras(

@@ -43,14 +43,28 @@ pub fn contributions(g: &Gaussians, cams: &[Camera]) -> Vec<f64> {
 
 /// Blending weight of each splat of `list` over the tile's pixels, in list order.
 fn tile_weights(splats: &[Splat2d], list: &[u32], x0: u32, y0: u32, w: u32, h: u32) -> Vec<f64> {
+    let mut sums = vec![0.0f32; list.len()];
+    for_each_weight(splats, list, (x0, y0, w, h), |slot, _, _, wgt| {
+        sums[slot] += wgt
+    });
+    sums.into_iter().map(f64::from).collect()
+}
+
+/// `visit(slot in list, x, y, blending weight a T)` for every pixel of the tile
+/// `(x0, y0, w, h)` that a splat of `list` (in depth order) adds to, by the compositing rule of
+/// [`crate::raster`]. Scalar, so exact to the rule rather than fast.
+pub fn for_each_weight(
+    splats: &[Splat2d],
+    list: &[u32],
+    (x0, y0, w, h): (u32, u32, u32, u32),
+    mut visit: impl FnMut(usize, u32, u32, f32),
+) {
     let mut t = vec![1.0f32; (w * h) as usize];
-    let mut out = vec![0.0f64; list.len()];
-    for (slot, &k) in out.iter_mut().zip(list) {
+    for (slot, &k) in list.iter().enumerate() {
         let s = &splats[k as usize];
         let [ca, cb, cc] = s.conic;
         let xs = (s.px[0] as u32).max(x0)..(s.px[2] as u32).min(x0 + w);
         let ys = (s.px[1] as u32).max(y0)..(s.px[3] as u32).min(y0 + h);
-        let mut sum = 0.0f32;
         for y in ys {
             let dy = y as f32 - s.mean[1];
             for x in xs.clone() {
@@ -70,21 +84,20 @@ fn tile_weights(splats: &[Splat2d], list: &[u32], x0: u32, y0: u32, w: u32, h: u
                     t[p] = 0.0;
                     continue;
                 }
-                sum += a * t[p];
+                visit(slot, x, y, a * t[p]);
                 t[p] = next;
             }
         }
-        *slot = sum as f64;
     }
-    out
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::camera::{orbit_cameras, OrbitSpec};
 
-    fn blob(n: usize) -> Gaussians {
+    /// Opaque small Gaussians along a curve (also the colour fit's test scene).
+    pub(crate) fn blob(n: usize) -> Gaussians {
         let mut g = Gaussians::new(0, 0);
         for i in 0..n {
             let f = i as f32 / n as f32;

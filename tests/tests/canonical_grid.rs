@@ -843,25 +843,7 @@ fn tiers_keep_the_image_and_shrink_a_real_scene() {
     let (two, d2) = encode(vec![0.043]);
     let (again, _) = encode(vec![0.043]);
     assert_eq!(two, again, "deterministic");
-    let cams = orbit_cameras(
-        &g,
-        &OrbitSpec {
-            width: 320,
-            height: 240,
-            count: 4,
-            ..Default::default()
-        },
-    );
-    let psnr = |d: &Gaussians| {
-        cams.iter()
-            .map(|c| {
-                let img = |g: &Gaussians| render(g, c, &RenderOptions::default()).unwrap().color;
-                metrics::psnr(&img(&g), &img(d))
-            })
-            .sum::<f64>()
-            / cams.len() as f64
-    };
-    let (p1, p2) = (psnr(&d1), psnr(&d2));
+    let (p1, p2) = (orbit_psnr(&g, &d1, 4), orbit_psnr(&g, &d2, 4));
     println!(
         "one part {} B {p1:.2} dB, tiers {} B {p2:.2} dB",
         one.len(),
@@ -874,6 +856,24 @@ fn tiers_keep_the_image_and_shrink_a_real_scene() {
         one.len()
     );
     assert!(p2 > p1 - 0.5, "tiers {p2:.2} dB vs {p1:.2} dB");
+}
+
+/// Mean PSNR of `decoded` against `source` over `count` views of the default orbit at 320x240.
+fn orbit_psnr(source: &Gaussians, decoded: &Gaussians, count: usize) -> f64 {
+    let cams = orbit_cameras(
+        source,
+        &OrbitSpec {
+            width: 320,
+            height: 240,
+            count,
+            ..Default::default()
+        },
+    );
+    let img = |g: &Gaussians, c| render(g, c, &RenderOptions::default()).unwrap().color;
+    cams.iter()
+        .map(|c| metrics::psnr(&img(source, c), &img(decoded, c)))
+        .sum::<f64>()
+        / cams.len() as f64
 }
 
 /// A GOP in layout 2: the source, its static parts, the payload and the stored static order.
@@ -1210,25 +1210,7 @@ fn colour_refit_keeps_the_geometry_and_renders_closer_on_a_real_scene() {
     assert_eq!(dp.opacity, dr.opacity);
     assert_ne!(dp.sh, dr.sh);
     // Views neither the fit nor its judge used (the default orbit, elevation 20 degrees).
-    let cams = orbit_cameras(
-        &g,
-        &OrbitSpec {
-            width: 320,
-            height: 240,
-            count: 6,
-            ..Default::default()
-        },
-    );
-    let psnr = |d: &Gaussians| {
-        cams.iter()
-            .map(|c| {
-                let img = |g: &Gaussians| render(g, c, &RenderOptions::default()).unwrap().color;
-                metrics::psnr(&img(&g), &img(d))
-            })
-            .sum::<f64>()
-            / cams.len() as f64
-    };
-    let (pp, pr) = (psnr(&dp), psnr(&dr));
+    let (pp, pr) = (orbit_psnr(&g, &dp, 6), orbit_psnr(&g, &dr, 6));
     println!(
         "plain {} B {pp:.2} dB, refit {} B {pr:.2} dB, {report:?}",
         plain.len(),
