@@ -225,6 +225,12 @@ impl CodecArgs {
             ("lossless", None) if self.tiered() => {
                 bail!("--tiers stores coarser levels: give a lossy --quality (or --bits)")
             }
+            ("lossless", None) if self.refit_colours => {
+                bail!(
+                    "--refit-colours refits the colours of a lossy coding: give a lossy \
+                     --quality (or --bits, or --target-psnr)"
+                )
+            }
             ("lossless", None) => return Ok(CanonicalCodec::Raw),
             ("lossless", Some(_)) => QuantBits::HIGH,
             (q, _) => QuantBits::preset(q).with_context(|| {
@@ -468,8 +474,10 @@ fn encode_to_target(
     if !(target.is_finite() && target > 0.0) {
         bail!("--target-psnr takes a PSNR in dB > 0, got {target}");
     }
+    // The search sets the bits itself; a lossy preset here only lets the rest be checked.
     let base = CodecArgs {
         target_psnr: None,
+        quality: "high".into(),
         ..codec.clone()
     };
     let cfg = base.config(meta)?;

@@ -334,6 +334,11 @@ fn a_failed_encode_leaves_no_file_and_an_in_place_re_encode_reads_its_input_firs
     // Rejected settings: nothing is created, not even an empty file or a temporary one.
     let err = dlgs_fails(&["encode", scene, "-o", out_s, "--tiers", "0.1,0.2"]);
     assert!(err.contains("must not increase"), "{err}");
+    let err = dlgs_fails(&["encode", scene, "-o", out_s, "--refit-colours"]);
+    assert!(
+        err.contains("--refit-colours refits the colours of a lossy coding"),
+        "{err}"
+    );
     assert!(listing().is_empty(), "{:?}", listing());
     // An existing output survives a failed encode unchanged.
     dlgs(&["encode", scene, "-o", out_s, "--quality", "high"]);
@@ -353,6 +358,40 @@ fn a_failed_encode_leaves_no_file_and_an_in_place_re_encode_reads_its_input_firs
     );
     dlgs(&["verify", out_s]);
     assert_eq!(listing(), ["x.dlgs"]);
+}
+
+#[test]
+fn refit_colours_reports_its_judgement_and_writes_a_valid_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    let scene = scene.to_str().unwrap();
+    let file = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let (plain, refit) = (file("plain.dlgs"), file("refit.dlgs"));
+    let opts = ["--quality", "medium", "--tiers", "0.5,0.2"];
+    dlgs(&[&["encode", scene, "-o", &plain][..], &opts].concat());
+    let text = dlgs(
+        &[
+            &["encode", scene, "-o", &refit, "--refit-colours"][..],
+            &opts,
+        ]
+        .concat(),
+    );
+    // Real lod3: the held-out views gain, so the refit is stored.
+    let line = text
+        .lines()
+        .find(|l| l.contains("colour refit"))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(line.contains("colour refit stored:"), "{text}");
+    dlgs(&["verify", &refit]);
+    let psnr = |f: &str| -> f64 {
+        let json = dlgs(&[
+            "compare", scene, f, "--json", "--width", "320", "--height", "240",
+        ]);
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        v["mean_psnr"].as_f64().unwrap()
+    };
+    let (pp, pr) = (psnr(&plain), psnr(&refit));
+    assert!(pr > pp, "refit {pr:.2} dB vs {pp:.2} dB");
 }
 
 #[test]
