@@ -1228,6 +1228,31 @@ fn colour_refit_keeps_the_geometry_and_renders_closer_on_a_real_scene() {
 }
 
 #[test]
+fn the_colour_refit_handles_degenerate_gaussians() {
+    // Zero quaternions, scales e^-30 and e^12, opacities at 0 and 1, a constant position
+    // channel, and a set with a single Gaussian: the refit codes, judges and decodes finite.
+    let cfg = EncoderConfig {
+        canonical: CanonicalCodec::Sorted {
+            bits: QuantBits::LOW,
+            sort: SortSpec::DEFAULT,
+        },
+        ..Default::default()
+    };
+    let g = degenerate_lod3();
+    let mut one = Gaussians::new(g.sh_degree, 0);
+    one.push_from(&g, 60);
+    for g in [g, one] {
+        let (_, _, _, dr, report) = plain_and_refit(&g, cfg.clone());
+        assert!(
+            report.before_db.is_finite() && report.after_db.is_finite(),
+            "{report:?}"
+        );
+        assert!(dr.sh.iter().all(|v| v.is_finite()));
+        assert!(dr.positions.as_flattened().iter().all(|v| v.is_finite()));
+    }
+}
+
+#[test]
 fn a_colour_refit_that_renders_worse_on_unseen_views_is_not_stored() {
     // Real donut (mip-splatting, SH 0): the fit gains on its own views but loses on the
     // held-out ones, so the file is the plain coding, byte for byte.
