@@ -66,33 +66,30 @@ impl View {
 
     /// The image `sum_i w_i x_i` (3 channels, no background) of per-Gaussian colours `x`.
     fn forward(&self, x: &[[f32; 3]]) -> Vec<f32> {
-        let tiles: Vec<Vec<(usize, [f32; 3])>> = (0..self.lists.len())
+        let tiles: Vec<Vec<[f32; 3]>> = (0..self.lists.len())
             .into_par_iter()
             .map(|i| {
-                let mut px: Vec<(usize, [f32; 3])> = Vec::new();
-                let mut acc = [[0.0f32; 3]; (TILE * TILE) as usize];
-                let mut seen = [usize::MAX; (TILE * TILE) as usize];
-                let (x0, y0, _, _) = self.tile_rect(i);
-                self.walk_tile(i, |slot, p, wgt| {
-                    let c = &x[self.splats[self.lists[i][slot] as usize].index as usize];
-                    let local = (p / self.width as usize - y0 as usize) * TILE as usize
-                        + (p % self.width as usize - x0 as usize);
-                    seen[local] = p;
+                let (x0, y0, w, h) = self.tile_rect(i);
+                let mut acc = vec![[0.0f32; 3]; (w * h) as usize];
+                let list = &self.lists[i];
+                for_each_weight(&self.splats, list, (x0, y0, w, h), |slot, px, py, wgt| {
+                    let c = &x[self.splats[list[slot] as usize].index as usize];
+                    let a = &mut acc[((py - y0) * w + (px - x0)) as usize];
                     for ch in 0..3 {
-                        acc[local][ch] += wgt * c[ch];
+                        a[ch] += wgt * c[ch];
                     }
                 });
-                for (l, &p) in seen.iter().enumerate() {
-                    if p != usize::MAX {
-                        px.push((p, acc[l]));
-                    }
-                }
-                px
+                acc
             })
             .collect();
         let mut img = vec![0.0f32; (self.width * self.height * 3) as usize];
-        for (p, c) in tiles.into_iter().flatten() {
-            img[p * 3..p * 3 + 3].copy_from_slice(&c);
+        for (i, acc) in tiles.iter().enumerate() {
+            let (x0, y0, w, _) = self.tile_rect(i);
+            for (l, c) in acc.iter().enumerate() {
+                let (lx, ly) = (l as u32 % w, l as u32 / w);
+                let p = ((y0 + ly) * self.width + x0 + lx) as usize;
+                img[p * 3..p * 3 + 3].copy_from_slice(c);
+            }
         }
         img
     }
