@@ -21,6 +21,7 @@ use constriction::stream::model::{DecoderModel, EncoderModel, EntropyModel};
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
 use constriction::stream::{Decode, Encode};
 
+use super::bit_mixer::Mixer;
 use super::grid_coder::{bad, class_of, neighbours, predict, read_words, zigzag};
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::Result;
@@ -39,6 +40,11 @@ const PREV_CLASSES: usize = 8;
 /// at most `2^8 * 2^10` tree nodes.
 pub const TREE_MAX_BITS: u8 = 10;
 pub const TREE_MAX_CONTEXT_BITS: u8 = 8;
+/// Mode 6: at most this many context bits of the channel before the previous one.
+pub const MIXED_TWO_MAX_K2: u8 = 4;
+
+/// A channel coded against: its cells and bits (`None`: there is none).
+pub type Previous<'a> = Option<(&'a [u16], u8)>;
 
 /// An adaptive binary model: `p` = probability of a 0 bit in units of `2^-16`, and how many
 /// bits it has seen (its adaptation is fast at first, then settles at `1/64`).
@@ -105,7 +111,15 @@ impl DecoderModel<PRECISION> for Binary {
 /// One direction of the coder: the encoder codes `bit` and returns it; the decoder ignores it
 /// and returns the decoded bit.
 pub(crate) trait BitCoder {
-    fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool>;
+    /// Code `bit` with the probability `p0` (units of `2^-16`, in `[P_MIN, ONE - P_MIN]`) of
+    /// a 0 bit; no model learns from it.
+    fn code_p(&mut self, p0: u32, bit: bool) -> Result<bool>;
+    /// Code `bit` with model `m`'s probability, then let `m` learn it.
+    fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool> {
+        let bit = self.code_p(m.p as u32, bit)?;
+        m.update(bit);
+        Ok(bit)
+    }
     /// A bit with probability 1/2 and no model.
     fn raw(&mut self, bit: bool) -> Result<bool> {
         let mut fresh = Adaptive::NEW;
@@ -149,11 +163,10 @@ impl DecoderModel<PRECISION> for Uniform {
 pub(crate) struct Encoder(pub(crate) DefaultRangeEncoder);
 
 impl BitCoder for Encoder {
-    fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool> {
+    fn code_p(&mut self, p0: u32, bit: bool) -> Result<bool> {
         self.0
-            .encode_symbol(bit, Binary { p0: m.p as u32 })
+            .encode_symbol(bit, Binary { p0 })
             .expect("a bool is inside a binary model");
-        m.update(bit);
         Ok(bit)
     }
 
@@ -175,13 +188,10 @@ pub(crate) struct Decoder<'a> {
 }
 
 impl BitCoder for Decoder<'_> {
-    fn code(&mut self, m: &mut Adaptive, _: bool) -> Result<bool> {
-        let bit = self
-            .dec
-            .decode_symbol(Binary { p0: m.p as u32 })
-            .map_err(|_| bad(self.r, "range coder stream ended early".into()))?;
-        m.update(bit);
-        Ok(bit)
+    fn code_p(&mut self, p0: u32, _: bool) -> Result<bool> {
+        self.dec
+            .decode_symbol(Binary { p0 })
+            .map_err(|_| bad(self.r, "range coder stream ended early".into()))
     }
 
     fn uniform(&mut self, _: u32, k: u8) -> Result<u32> {
@@ -218,6 +228,14 @@ pub enum Mode {
     TreeGivenPrevious(u8),
     /// Value tree in one context (an adaptive order-0 model that needs no other channel).
     Tree,
+    /// Value tree whose every bit mixes the predictions of an order-0 model, a model in the
+    /// context of the left and upper neighbours' top bits and, for `k > 0`, one in the context
+    /// of the previous channel's top `k` bits ([`bit_mixer`](super::bit_mixer), since 1.13).
+    Mixed(u8),
+    /// As `Mixed(k)` with `k > 0`, plus a model in the context of the previous channel's top
+    /// `k` bits together with the top `k2` bits of the channel before it (since 1.14): a
+    /// Gaussian's third colour or log-scale follows the other two.
+    MixedTwo(u8, u8),
 }
 
 impl Mode {
@@ -228,13 +246,20 @@ impl Mode {
             Mode::ResidualMinusPrevious => (2, 0),
             Mode::TreeGivenPrevious(k) => (3, k),
             Mode::Tree => (4, 0),
+            Mode::Mixed(k) => (5, k),
+            Mode::MixedTwo(k, k2) => (6, k | k2 << 4),
         }
+    }
+
+    /// Whether decoding needs the cells of the channel before the previous one too (mode 6).
+    pub fn needs_two_previous(self) -> bool {
+        matches!(self, Mode::MixedTwo(..))
     }
 
     /// Whether decoding needs the previous channel's cells (a reader decodes the channels
     /// that do not in parallel).
     pub fn needs_previous(self) -> bool {
-        !matches!(self, Mode::Residual | Mode::Tree)
+        !matches!(self, Mode::Residual | Mode::Tree | Mode::Mixed(0))
     }
 
     /// The mode named by a codec-5 channel's first two bytes.
@@ -245,23 +270,38 @@ impl Mode {
             (2, 0) => Some(Mode::ResidualMinusPrevious),
             (3, k) => Some(Mode::TreeGivenPrevious(k)),
             (4, 0) => Some(Mode::Tree),
+            (5, k) => Some(Mode::Mixed(k)),
+            (6, k) => Some(Mode::MixedTwo(k & 15, k >> 4)),
             _ => None,
         }
     }
 
-    /// Why this mode cannot code a `bits`-bit channel after `prev`, if it cannot.
-    fn unusable(self, bits: u8, prev: Option<(&[u16], u8)>) -> Option<String> {
+    /// Why this mode cannot code a `bits`-bit channel after `prev` (and `prev2`, the channel
+    /// before it), if it cannot.
+    fn unusable(self, bits: u8, prev: Previous, prev2: Previous) -> Option<String> {
         let too_wide = (bits > TREE_MAX_BITS)
             .then(|| format!("value tree for {bits} bits (at most {TREE_MAX_BITS})"));
+        if let Mode::MixedTwo(k, k2) = self {
+            return if prev2.is_none() {
+                Some("needs two previous channels in the set".into())
+            } else if !(1..=MIXED_TWO_MAX_K2).contains(&k2) {
+                Some(format!(
+                    "{k2} context bits of the channel before (1..={MIXED_TWO_MAX_K2})"
+                ))
+            } else {
+                // As mode 3 with `k` (so `k > 0`, unlike mode 5).
+                Mode::TreeGivenPrevious(k).unusable(bits, prev, None)
+            };
+        }
         match (self, prev) {
             (Mode::Residual, _) => None,
-            (Mode::Tree, _) => too_wide,
+            (Mode::Tree, _) | (Mode::Mixed(0), _) => too_wide,
             (_, None) => Some("needs a previous channel in the set".into()),
             (Mode::ResidualGivenPrevious, _) => None,
             (Mode::ResidualMinusPrevious, Some((_, pb))) => {
                 (pb != bits).then(|| format!("needs a previous channel of {bits} bits, not {pb}"))
             }
-            (Mode::TreeGivenPrevious(k), _) => {
+            (Mode::TreeGivenPrevious(k), _) | (Mode::Mixed(k), _) | (Mode::MixedTwo(k, _), _) => {
                 if too_wide.is_some() {
                     too_wide
                 } else if !(1..=TREE_MAX_CONTEXT_BITS).contains(&k) {
@@ -307,10 +347,13 @@ fn code_cells<C: BitCoder>(
     width: usize,
     bits: u8,
     mode: Mode,
-    prev: Option<(&[u16], u8)>,
+    prev: Previous,
+    prev2: Previous,
 ) -> Result<()> {
     let b = bits as usize;
     match mode {
+        Mode::Mixed(k) => code_mixed(coder, q, width, bits, k, 0, prev, None)?,
+        Mode::MixedTwo(k, k2) => code_mixed(coder, q, width, bits, k, k2, prev, prev2)?,
         Mode::TreeGivenPrevious(_) | Mode::Tree => {
             // The plain tree has one context; the other takes the previous cell's top `k` bits.
             let (prev_cells, shift, contexts) = match (mode, prev) {
@@ -392,20 +435,122 @@ fn code_cells<C: BitCoder>(
     Ok(())
 }
 
+/// Neighbour contexts of mode 5: each of the left and upper neighbours is absent (0) or its
+/// top two bits plus one (1..=4).
+const NEIGHBOUR_CONTEXTS: usize = 25;
+
+/// The top `k` bits of a channel's cells as a context: how many contexts there are, and cell
+/// `i`'s (previous cells fit their bits when decoded; `min` keeps a bad caller in range).
+fn top_bits((cells, b): (&[u16], u8), k: u8) -> (usize, impl Fn(usize) -> usize + '_) {
+    let shift = b.saturating_sub(k);
+    let contexts = 1usize << k.min(b);
+    (contexts, move |i: usize| {
+        ((cells[i] >> shift) as usize).min(contexts - 1)
+    })
+}
+
+/// Modes 5 and 6: the value tree of [`Mode::Mixed`] (`k2 = 0`, `prev2` unused) or
+/// [`Mode::MixedTwo`] over every cell.
+#[allow(clippy::too_many_arguments)]
+fn code_mixed<C: BitCoder>(
+    coder: &mut C,
+    q: &mut [u16],
+    width: usize,
+    bits: u8,
+    k: u8,
+    k2: u8,
+    prev: Previous,
+    prev2: Previous,
+) -> Result<()> {
+    match (prev, prev2) {
+        (Some(p), Some(p2)) if k > 0 && k2 > 0 => {
+            let (c1, x1) = top_bits(p, k);
+            let (c2, x2) = top_bits(p2, k2);
+            mixed_tree::<C, 5>(coder, q, width, bits, [c1, c1 * c2], |i| {
+                [x1(i), x2(i) * c1 + x1(i)]
+            })
+        }
+        (Some(p), _) if k > 0 => {
+            let (c1, x1) = top_bits(p, k);
+            mixed_tree::<C, 4>(coder, q, width, bits, [c1, 0], |i| [x1(i), 0])
+        }
+        _ => mixed_tree::<C, 3>(coder, q, width, bits, [0, 0], |_| [0, 0]),
+    }
+}
+
+/// The walk of modes 5 and 6 with `N - 1` models: order 0, the neighbours' context and, for
+/// `N >= 4`, the previous channel's context `contexts(i)[0]` (one of `counts[0]`), for `N = 5`
+/// also the context of both previous channels `contexts(i)[1]` (one of `counts[1]`).
+fn mixed_tree<C: BitCoder, const N: usize>(
+    coder: &mut C,
+    q: &mut [u16],
+    width: usize,
+    bits: u8,
+    counts: [usize; 2],
+    contexts: impl Fn(usize) -> [usize; 2],
+) -> Result<()> {
+    let b = bits as usize;
+    let nodes = 1usize << b;
+    let top = bits.saturating_sub(2);
+    let mut order0 = vec![Adaptive::NEW; nodes];
+    let mut given_neighbours = vec![Adaptive::NEW; NEIGHBOUR_CONTEXTS * nodes];
+    let mut given_prev = vec![Adaptive::NEW; counts[0] * nodes];
+    let mut given_both = vec![Adaptive::NEW; counts[1] * nodes];
+    let mut mixer = Mixer::<N>::new(b);
+    for i in 0..q.len() {
+        let (a, up, _, ha, hu) = neighbours(q, i, width);
+        let side = |v: u16, has: bool| if has { 1 + (v >> top) as usize } else { 0 };
+        // Neighbours fit their bits (decoded ones by construction); `min` keeps a bad caller
+        // from indexing past the models.
+        let nbase = (side(a, ha) * 5 + side(up, hu)).min(NEIGHBOUR_CONTEXTS - 1) * nodes;
+        let [x1, x2] = if N >= 4 { contexts(i) } else { [0, 0] };
+        let (pbase, bbase) = (x1 * nodes, x2 * nodes);
+        let mut node = 1usize;
+        for level in (0..b).rev() {
+            let bit = q[i] >> level & 1 == 1;
+            let mut p0 = [0u16; N];
+            p0[0] = order0[node].p;
+            p0[1] = given_neighbours[nbase + node].p;
+            if N >= 4 {
+                p0[2] = given_prev[pbase + node].p;
+            }
+            if N == 5 {
+                p0[3] = given_both[bbase + node].p;
+            }
+            let p12 = mixer.predict(p0, b - 1 - level);
+            let got = coder.code_p((p12 << 4).clamp(P_MIN, ONE - P_MIN), bit)?;
+            mixer.update(got);
+            order0[node].update(got);
+            given_neighbours[nbase + node].update(got);
+            if N >= 4 {
+                given_prev[pbase + node].update(got);
+            }
+            if N == 5 {
+                given_both[bbase + node].update(got);
+            }
+            node = node * 2 + got as usize;
+        }
+        q[i] = (node - nodes) as u16;
+    }
+    Ok(())
+}
+
 /// Codec 5 data for `q` in `mode`; `None` when the mode cannot code this channel.
 pub fn encode(
     q: &[u16],
-    prev: Option<(&[u16], u8)>,
+    prev: Previous,
+    prev2: Previous,
     width: usize,
     bits: u8,
     mode: Mode,
 ) -> Option<Vec<u8>> {
-    if mode.unusable(bits, prev).is_some() {
+    if mode.unusable(bits, prev, prev2).is_some() {
         return None;
     }
     let mut coder = Encoder(DefaultRangeEncoder::new());
     let mut cells = q.to_vec();
-    code_cells(&mut coder, &mut cells, width, bits, mode, prev).expect("encoding cannot fail");
+    code_cells(&mut coder, &mut cells, width, bits, mode, prev, prev2)
+        .expect("encoding cannot fail");
     debug_assert_eq!(cells, q, "the walk reconstructs what it codes");
     let words = coder.0.into_compressed().expect("in-memory backend");
     let (m, k) = mode.byte();
@@ -418,7 +563,7 @@ pub fn encode(
 }
 
 /// The modes the encoder tries.
-pub fn candidate_modes(bits: u8, prev: Option<(&[u16], u8)>) -> Vec<Mode> {
+pub fn candidate_modes(bits: u8, prev: Previous, prev2: Previous) -> Vec<Mode> {
     let mut modes = vec![
         Mode::Residual,
         Mode::ResidualGivenPrevious,
@@ -426,30 +571,36 @@ pub fn candidate_modes(bits: u8, prev: Option<(&[u16], u8)>) -> Vec<Mode> {
     ];
     modes.push(Mode::Tree);
     modes.extend([2, 4, 6, 8].map(Mode::TreeGivenPrevious));
+    modes.extend([0, 2, 4].map(Mode::Mixed));
+    for k in [2, 4] {
+        modes.extend([1, 2, 3].map(|k2| Mode::MixedTwo(k, k2)));
+    }
     modes
         .into_iter()
-        .filter(|m| m.unusable(bits, prev).is_none())
+        .filter(|m| m.unusable(bits, prev, prev2).is_none())
         .collect()
 }
 
-/// Decode `n` cells of codec 5; `prev` is the previous channel record's cells and bits.
+/// Decode `n` cells of codec 5; `prev` is the previous channel record's cells and bits,
+/// `prev2` the record's before it.
 pub fn decode(
     mut r: ByteReader,
     n: usize,
     width: usize,
     bits: u8,
-    prev: Option<(&[u16], u8)>,
+    prev: Previous,
+    prev2: Previous,
 ) -> Result<Vec<u16>> {
     let (m, k) = (r.u8("adaptive mode")?, r.u8("adaptive context bits")?);
     let mode = Mode::from_bytes(m, k)
         .ok_or_else(|| bad(&r, format!("adaptive mode {m} with {k} context bits")))?;
-    if let Some(why) = mode.unusable(bits, prev) {
+    if let Some(why) = mode.unusable(bits, prev, prev2) {
         return Err(bad(&r, format!("adaptive mode {mode:?}: {why}")));
     }
     let dec = open_stream(&mut r, "adaptive")?;
     let mut q = vec![0u16; n];
     let mut coder = Decoder { dec, r: &r };
-    code_cells(&mut coder, &mut q, width, bits, mode, prev)?;
+    code_cells(&mut coder, &mut q, width, bits, mode, prev, prev2)?;
     Ok(q)
 }
 
@@ -484,9 +635,16 @@ mod tests {
                 for pb in [bits, 3, 12] {
                     let prev_q = noise(n, 7, pb);
                     let pv = Some((prev_q.as_slice(), pb));
-                    for mode in candidate_modes(bits, pv) {
-                        let e = encode(&q, pv, width, bits, mode).unwrap();
-                        let d = decode(ByteReader::new(&e, 0), n, width, bits, pv).unwrap();
+                    let prev2_q = noise(n, 9, 16 - pb);
+                    let pv2 = Some((prev2_q.as_slice(), 16 - pb));
+                    let modes = candidate_modes(bits, pv, pv2);
+                    assert_eq!(
+                        modes.iter().any(|m| m.needs_two_previous()),
+                        bits <= TREE_MAX_BITS
+                    );
+                    for mode in modes {
+                        let e = encode(&q, pv, pv2, width, bits, mode).unwrap();
+                        let d = decode(ByteReader::new(&e, 0), n, width, bits, pv, pv2).unwrap();
                         assert_eq!(d, q, "bits {bits}, n {n}, mode {mode:?}");
                     }
                 }
@@ -500,41 +658,114 @@ mod tests {
         let prev = noise(n, 11, 8);
         // Each value a function of the previous channel's value: the tree learns the map.
         let q: Vec<u16> = prev.iter().map(|&v| (v * 7 + 3) % 256).collect();
-        let alone = encode(&q, None, 64, 8, Mode::Residual).unwrap().len();
-        let tree = encode(&q, Some((&prev, 8)), 64, 8, Mode::TreeGivenPrevious(8))
-            .unwrap()
-            .len();
+        let alone = encode(&q, None, None, 64, 8, Mode::Residual).unwrap().len();
+        let tree = encode(
+            &q,
+            Some((&prev, 8)),
+            None,
+            64,
+            8,
+            Mode::TreeGivenPrevious(8),
+        )
+        .unwrap()
+        .len();
         assert!(tree * 2 < alone, "tree {tree} B, alone {alone} B");
+    }
+
+    #[test]
+    fn the_mixed_mode_learns_from_neighbours_and_the_previous_channel() {
+        // Rows of one of four levels (the upper neighbour knows the cell), plus a low part
+        // that follows the previous channel: no single context of modes 3-4 sees both.
+        let (n, width) = (4096, 64);
+        let prev = noise(n, 13, 8);
+        let q: Vec<u16> = (0..n)
+            .map(|i| ((i / width % 4) as u16 * 64 + prev[i] % 64) & 255)
+            .collect();
+        let pv = Some((prev.as_slice(), 8));
+        let best_tree = [
+            Mode::Tree,
+            Mode::TreeGivenPrevious(2),
+            Mode::TreeGivenPrevious(8),
+        ]
+        .into_iter()
+        .map(|m| encode(&q, pv, None, width, 8, m).unwrap().len())
+        .min()
+        .unwrap();
+        let mixed = encode(&q, pv, None, width, 8, Mode::Mixed(8)).unwrap();
+        assert!(
+            mixed.len() * 10 < best_tree * 9,
+            "mixed {} B, trees {best_tree} B",
+            mixed.len()
+        );
+        // Its decoder needs the same previous channel.
+        assert_eq!(
+            decode(ByteReader::new(&mixed, 0), n, width, 8, pv, None).unwrap(),
+            q
+        );
+        assert!(decode(ByteReader::new(&mixed, 0), n, width, 8, None, None).is_err());
     }
 
     #[test]
     fn malformed_headers_and_streams_are_typed_errors() {
         let q = noise(100, 5, 9);
-        let e = encode(&q, None, 10, 9, Mode::Residual).unwrap();
-        // Unknown mode, modes without a previous channel, a tree too wide.
-        for (m, k) in [(5u8, 0u8), (1, 0), (2, 0), (3, 4), (0, 1), (4, 1)] {
+        let e = encode(&q, None, None, 10, 9, Mode::Residual).unwrap();
+        // Unknown mode, modes without a previous channel, a tree too wide, too many context
+        // bits.
+        for (m, k) in [
+            (6u8, 0u8),
+            (1, 0),
+            (2, 0),
+            (3, 4),
+            (0, 1),
+            (4, 1),
+            (5, 2),
+            (5, 9),
+        ] {
             let mut bad_e = e.clone();
             bad_e[0] = m;
             bad_e[1] = k;
-            assert!(decode(ByteReader::new(&bad_e, 0), 100, 10, 9, None).is_err());
+            assert!(decode(ByteReader::new(&bad_e, 0), 100, 10, 9, None, None).is_err());
         }
         let prev = noise(100, 1, 12);
-        let mut tree = e.clone();
-        tree[0] = 3;
-        tree[1] = 4;
-        assert!(decode(ByteReader::new(&tree, 0), 100, 10, 12, Some((&prev, 12))).is_err());
+        // Too wide for a tree; mode 6 without the channel before, or with 0 or 5 of its bits.
+        let pv2 = Some((prev.as_slice(), 12));
+        for (m, k, bits, p2) in [
+            (3u8, 4u8, 12u8, pv2),
+            (5, 0, 12, pv2),
+            (5, 4, 12, pv2),
+            (6, 0x12, 12, pv2),
+            (6, 0x12, 9, None),
+            (6, 0x02, 9, pv2),
+            (6, 0x52, 9, pv2),
+            (6, 0x10, 9, pv2),
+        ] {
+            let mut tree = e.clone();
+            tree[0] = m;
+            tree[1] = k;
+            let pv = Some((&prev[..], 12));
+            let got = decode(ByteReader::new(&tree, 0), 100, 10, bits, pv, p2);
+            assert!(got.is_err(), "mode {m} k {k:#x} bits {bits}");
+        }
         // Truncated words, trailing bytes.
-        assert!(decode(ByteReader::new(&e[..e.len() - 1], 0), 100, 10, 9, None).is_err());
+        assert!(decode(
+            ByteReader::new(&e[..e.len() - 1], 0),
+            100,
+            10,
+            9,
+            None,
+            None
+        )
+        .is_err());
         let mut long = e.clone();
         long.push(0);
-        assert!(decode(ByteReader::new(&long, 0), 100, 10, 9, None).is_err());
+        assert!(decode(ByteReader::new(&long, 0), 100, 10, 9, None, None).is_err());
         // Garbage words decode to some values or a typed error, never a panic, and every value
         // fits the bits.
         let mut junk = e.clone();
         for (i, b) in junk.iter_mut().enumerate().skip(6) {
             *b = (i * 37 % 251) as u8;
         }
-        if let Ok(v) = decode(ByteReader::new(&junk, 0), 100, 10, 9, None) {
+        if let Ok(v) = decode(ByteReader::new(&junk, 0), 100, 10, 9, None, None) {
             assert!(v.iter().all(|&x| x < 512));
         }
         // Random streams in every mode and width: values fit or a typed error, never a panic.
@@ -546,9 +777,10 @@ mod tests {
             s
         };
         let prev = noise(300, 2, 8);
-        for round in 0..200 {
+        for round in 0..320 {
             let bits = [1u8, 4, 8, 10, 16][round % 5];
-            let (m, k) = [(0u8, 0u8), (1, 0), (2, 0), (3, 5), (4, 0)][round / 5 % 5];
+            let (m, k) =
+                [(0u8, 0u8), (1, 0), (2, 0), (3, 5), (4, 0), (5, 0), (5, 3)][round / 5 % 7];
             let words = rnd() % 40;
             let mut e = vec![m, k];
             e.put_u32(words);
@@ -556,7 +788,7 @@ mod tests {
                 e.put_u32(rnd());
             }
             let pv = Some((prev.as_slice(), 8));
-            if let Ok(v) = decode(ByteReader::new(&e, 0), 300, 18, bits, pv) {
+            if let Ok(v) = decode(ByteReader::new(&e, 0), 300, 18, bits, pv, pv) {
                 assert!(v.iter().all(|&x| (x as u32) < 1 << bits));
             }
         }

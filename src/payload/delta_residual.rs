@@ -145,6 +145,7 @@ fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i
         grid_width(n),
         bits,
         None,
+        None,
     )
     .map_err(|e| match e.kind {
         ErrorKind::Payload { reason, .. } => bad(reason, e.offset),

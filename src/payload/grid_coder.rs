@@ -10,7 +10,7 @@ use constriction::stream::model::ContiguousCategoricalEntropyModel;
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
 use constriction::stream::{Decode, Encode};
 
-use super::adaptive_coder;
+use super::adaptive_coder::{self, Previous};
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::{ErrorKind, Result};
 
@@ -480,12 +480,18 @@ fn encode_histogram_delta(
 /// parallel.
 pub const DEPENDENT_MARGIN: f64 = 0.005;
 
+/// Codec 5's mixed modes (5 and 6) must be this much smaller than the channel's best other
+/// coding: they decode about 3 times slower than the value trees.
+pub const MIXED_MARGIN: f64 = 0.01;
+
 /// Encode with whichever codec is smallest for this channel: codecs 0-4
 /// ([`encode_best_tabled`]) and every usable mode of codec 5, preferring by
-/// [`DEPENDENT_MARGIN`] those that decode without the previous channel.
+/// [`DEPENDENT_MARGIN`] those that decode without the previous channel (`prev`; `prev2` is
+/// the channel before it, for codec 5 mode 6) and by [`MIXED_MARGIN`] the others.
 pub fn encode_best(
     q: &[u16],
-    prev: Option<(&[u16], u8)>,
+    prev: Previous,
+    prev2: Previous,
     width: usize,
     bits: u8,
     zstd_level: i32,
@@ -499,16 +505,21 @@ pub fn encode_best(
     if let Some(d) = encode_histogram_delta(q, prev, bits, zstd_level) {
         candidates.push((true, GridCodec::HistogramDelta, d));
     }
-    for mode in adaptive_coder::candidate_modes(bits, prev) {
-        if let Some(d) = adaptive_coder::encode(q, prev, width, bits, mode) {
+    for mode in adaptive_coder::candidate_modes(bits, prev, prev2) {
+        if let Some(d) = adaptive_coder::encode(q, prev, prev2, width, bits, mode) {
             candidates.push((mode.needs_previous(), GridCodec::Adaptive, d));
         }
     }
+    // Modes 5 and 6 are judged by their size plus the margin.
+    let judged = |c: &(bool, GridCodec, Vec<u8>)| {
+        let mixed = c.1 == GridCodec::Adaptive && matches!(c.2.first(), Some(5 | 6));
+        c.2.len() as f64 * if mixed { 1.0 + MIXED_MARGIN } else { 1.0 }
+    };
     let smallest = |dep: bool| {
         candidates
             .iter()
             .filter(|c| c.0 == dep)
-            .min_by_key(|c| c.2.len())
+            .min_by(|a, b| judged(a).total_cmp(&judged(b)))
             .map(|c| (c.1, c.2.clone()))
     };
     let independent = smallest(false).expect("codecs 0-3 always code");
@@ -537,14 +548,15 @@ pub fn decode(
     n: usize,
     width: usize,
     bits: u8,
-    prev: Option<(&[u16], u8)>,
+    prev: Previous,
+    prev2: Previous,
 ) -> Result<Vec<u16>> {
     let at = r.offset();
     let q = match codec {
         GridCodec::Constant => vec![0u16; n],
         GridCodec::Predictive => decode_predictive(r, n, width, bits)?,
         GridCodec::Histogram | GridCodec::HistogramDelta => decode_histogram(r, n, bits)?,
-        GridCodec::Adaptive => adaptive_coder::decode(r, n, width, bits, prev)?,
+        GridCodec::Adaptive => adaptive_coder::decode(r, n, width, bits, prev, prev2)?,
         GridCodec::Zstd => {
             let mut r = r;
             let per = if bits <= 8 { 1 } else { 2 };
@@ -588,7 +600,16 @@ mod tests {
         assert_eq!(d, q);
         let (codec, b) = encode_classic(q, width, bits, 3);
         assert_eq!(
-            decode(codec, ByteReader::new(&b, 0), q.len(), width, bits, None).unwrap(),
+            decode(
+                codec,
+                ByteReader::new(&b, 0),
+                q.len(),
+                width,
+                bits,
+                None,
+                None
+            )
+            .unwrap(),
             q
         );
         e.len()
@@ -678,7 +699,7 @@ mod tests {
         let (codec, b) = encode_best_tabled(&follow, Some((&q, 9)), 100, 9, 3);
         assert_eq!(codec, GridCodec::HistogramDelta);
         assert!(b.len() * 8 < n * 3, "{} bytes", b.len());
-        let mut d = decode(codec, ByteReader::new(&b, 0), n, 100, 9, None).unwrap();
+        let mut d = decode(codec, ByteReader::new(&b, 0), n, 100, 9, None, None).unwrap();
         undo_delta(&mut d, &q, 9);
         assert_eq!(d, follow);
         // Wrap-around of the modular difference, and a two-symbol alphabet.

@@ -617,11 +617,13 @@ fn code_set(
             }
             // Codecs 4 and 5 may code against the previous channel; not against octree
             // positions, so that readers decode the octree beside the other channels.
-            let prev = j
-                .checked_sub(1)
-                .filter(|&p| p >= first)
-                .map(|p| (chans[p].3.as_slice(), chans[p].0));
-            let (codec, data) = grid_coder::encode_best(q, prev, w, *b, zstd_level);
+            let earlier = |back: usize| {
+                j.checked_sub(back)
+                    .filter(|&p| p >= first)
+                    .map(|p| (chans[p].3.as_slice(), chans[p].0))
+            };
+            let (codec, data) =
+                grid_coder::encode_best(q, earlier(1), earlier(2), w, *b, zstd_level);
             Channel {
                 bits: *b,
                 min: *min,
@@ -1078,20 +1080,30 @@ fn decode_set(
     // split the records into chains that start at an independent channel, decode the chains in
     // parallel and each chain in order (same cells whatever the thread count). The first
     // record after octree positions starts a chain: it has no previous channel (§6.5.2).
+    let mode = |s: &Stored| {
+        s.5.get(..2)
+            .and_then(|b| super::adaptive_coder::Mode::from_bytes(b[0], b[1]))
+    };
     let needs_previous = |s: &Stored| match s.2 {
         GridCodec::HistogramDelta => true,
-        GridCodec::Adaptive => {
-            s.5.get(..2)
-                .and_then(|b| super::adaptive_coder::Mode::from_bytes(b[0], b[1]))
-                .is_none_or(|m| m.needs_previous())
-        }
+        GridCodec::Adaptive => mode(s).is_none_or(|m| m.needs_previous()),
         _ => false,
     };
+    let needs_two =
+        |s: &Stored| s.2 == GridCodec::Adaptive && mode(s).is_some_and(|m| m.needs_two_previous());
     let mut chains: Vec<std::ops::Range<usize>> = Vec::new();
     for j in first..stored.len() {
         match chains.last_mut() {
             Some(c) if needs_previous(&stored[j]) => c.end = j + 1,
             _ => chains.push(j..j + 1),
+        }
+        // Codec 5 mode 6 also reads the record before the previous one: when the previous
+        // record starts a chain, this chain joins the one before it (whose last record that
+        // is). Without such a record the chain stays as it is and decoding reports it.
+        let k = chains.len();
+        if needs_two(&stored[j]) && k >= 2 && chains[k - 1].start + 1 == j {
+            let last = chains.pop().expect("two chains");
+            chains[k - 2].end = last.end;
         }
     }
     let decode_chain = |range: &std::ops::Range<usize>| {
@@ -1099,8 +1111,12 @@ fn decode_set(
         for j in range.clone() {
             let (_, bits, codec, _, _, data, at) = stored[j];
             let prev = out.last().map(|p| (p.as_slice(), stored[j - 1].1));
-            let mut q =
-                grid_coder::decode(codec, ByteReader::new(data, at), n, w.max(1), bits, prev)?;
+            let prev2 = out
+                .len()
+                .checked_sub(2)
+                .map(|p| (out[p].as_slice(), stored[j - 2].1));
+            let r = ByteReader::new(data, at);
+            let mut q = grid_coder::decode(codec, r, n, w.max(1), bits, prev, prev2)?;
             if codec == GridCodec::HistogramDelta {
                 let (p, _) = prev.expect("codec 4 continues a chain (checked above)");
                 grid_coder::undo_delta(&mut q, p, bits);

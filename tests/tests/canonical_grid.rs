@@ -350,15 +350,25 @@ fn the_adaptive_codec_shrinks_real_scenes_and_decodes_exactly() {
             let prev = j
                 .checked_sub(1)
                 .map(|p| (q.channels[p].3.as_slice(), q.channels[p].0));
-            let (codec, data) = grid_coder::encode_best(cells, prev, w, *b, 3);
+            let prev2 = j
+                .checked_sub(2)
+                .map(|p| (q.channels[p].3.as_slice(), q.channels[p].0));
+            let (codec, data) = grid_coder::encode_best(cells, prev, prev2, w, *b, 3);
             tabled += grid_coder::encode_best_tabled(cells, prev, w, *b, 3)
                 .1
                 .len();
             best += data.len();
             adaptive += (codec == GridCodec::Adaptive) as usize;
-            let mut d =
-                grid_coder::decode(codec, ByteReader::new(&data, 0), cells.len(), w, *b, prev)
-                    .unwrap();
+            let mut d = grid_coder::decode(
+                codec,
+                ByteReader::new(&data, 0),
+                cells.len(),
+                w,
+                *b,
+                prev,
+                prev2,
+            )
+            .unwrap();
             if codec == GridCodec::HistogramDelta {
                 grid_coder::undo_delta(&mut d, prev.unwrap().0, *b);
             }
