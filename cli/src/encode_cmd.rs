@@ -98,10 +98,11 @@ pub struct CodecArgs {
     pub tiers: Vec<f64>,
     /// Lossy still scenes: after coding, decode what was stored, fit every Gaussian's colour
     /// (SH DC) so the decoded scene renders like the source from 36 views of its own (320x240),
-    /// and code the colours again; stored only if 12 other views of its own render closer to
-    /// the source (format unchanged). The colours absorb part of the error of the quantised
-    /// positions, shapes and opacities (BENCHMARKS.md "Colour refit"). Codes the scene twice,
-    /// plus the fit. With --target-psnr: the search's closest candidates below the target are
+    /// and code the colours again, both as fitted and put on the quantiser's levels; the one
+    /// that 12 other views of its own render closest to the source is stored if it beats the
+    /// first coding (format unchanged). The colours absorb part of the error of the quantised
+    /// positions, shapes and opacities (BENCHMARKS.md "Colour refit"). Codes the scene three
+    /// times, plus the fit. With --target-psnr: the search's closest candidates below the target are
     /// also tried with the refit (at most 4, each with the cost above).
     #[arg(long)]
     pub refit_colours: bool,
@@ -583,7 +584,7 @@ pub fn encode_file(
             let s = ProgressBar::new_spinner().with_message(if codec.reallocate_bits > 0 {
                 "reallocating bits (coding and rendering candidates)"
             } else if codec.refit_colours {
-                "refitting colours (coding twice, fitting on 36 renders, judging on 12)"
+                "refitting colours (coding three times, fitting on 36 renders, judging on 12)"
             } else {
                 "measuring importance (36 renders)"
             });
@@ -629,8 +630,13 @@ pub fn encode_file(
             }
             if let Some(r) = report.refit {
                 println!(
-                    "  colour refit {}: {:.2} -> {:.2} dB on the encoder's held-out views",
+                    "  colour refit {} ({}): {:.2} -> {:.2} dB on the encoder's held-out views",
                     if r.kept { "stored" } else { "not stored" },
+                    if r.on_levels {
+                        "on the quantiser's levels"
+                    } else {
+                        "offsets rounded by the coder"
+                    },
                     r.before_db,
                     r.after_db
                 );

@@ -381,7 +381,7 @@ fn refit_colours_reports_its_judgement_and_writes_a_valid_file() {
         .lines()
         .find(|l| l.contains("colour refit"))
         .unwrap_or_else(|| panic!("{text}"));
-    assert!(line.contains("colour refit stored:"), "{text}");
+    assert!(line.contains("colour refit stored ("), "{text}");
     dlgs(&["verify", &refit]);
     let psnr = |f: &str| -> f64 {
         let json = dlgs(&[

@@ -2,6 +2,8 @@
 //! Gaussians) at `high`, with grid positions (layout 0), octree positions (layout 2, since
 //! format 1.10) and octree positions with coarse rotations (layout 3, the default since 1.11), and a GENERATED binary voxel residual field (`RNTC`, the reference's
 //! shapes; no trained DLGStream model exists here) applied to that scene, 1 and 2 threads.
+//! Also each codec-5 mode on one real channel (the plant's SH DC blue at `high`, given green and
+//! red), 1 thread: what the mixed modes (5 and 6, since format 1.13) cost against the trees.
 //! `cargo bench -p dlgs-decoder --bench canonical`
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -66,6 +68,36 @@ fn bench(c: &mut Criterion) {
         });
         group.bench_function(format!("rntc_apply/{threads}t"), |b| {
             b.iter(|| pool.install(|| field.apply(&canon)).unwrap())
+        });
+    }
+    group.finish();
+    codec5_modes(c, &canon.statics);
+}
+
+/// Decode time of one channel in each codec-5 mode (single thread: a channel is one stream).
+fn codec5_modes(c: &mut Criterion, g: &dlgs::model::Gaussians) {
+    use dlgs::bytes::ByteReader;
+    use dlgs::payload::adaptive_coder::{decode, encode, Mode};
+    let set = sorted_grid::quantise_set(g, &QuantBits::HIGH);
+    // Channels: position 3, log-scale 3, rotation index and 3 components, opacity, then DC.
+    let dc = 11;
+    let cells = |j: usize| (set.channels[j].3.as_slice(), set.channels[j].0);
+    let (q, bits) = cells(dc + 2);
+    let (prev, prev2) = (Some(cells(dc + 1)), Some(cells(dc)));
+    let width = sorted_grid::grid_width(q.len());
+    let mut group = c.benchmark_group("codec5_plant_dc_blue");
+    group.sample_size(20);
+    for (name, mode) in [
+        ("tree", Mode::Tree),
+        ("tree_given_previous_4", Mode::TreeGivenPrevious(4)),
+        ("mixed_0", Mode::Mixed(0)),
+        ("mixed_4", Mode::Mixed(4)),
+        ("mixed_two_4_2", Mode::MixedTwo(4, 2)),
+    ] {
+        let data = encode(q, prev, prev2, width, bits, mode).unwrap();
+        println!("{name}: {} bytes", data.len());
+        group.bench_function(name, |b| {
+            b.iter(|| decode(ByteReader::new(&data, 0), q.len(), width, bits, prev, prev2).unwrap())
         });
     }
     group.finish();

@@ -198,7 +198,7 @@ pub struct EncoderConfig {
     pub rotation_coarsening: Option<RotationCoarsening>,
     /// Lossy (`CSOG`) still scenes: fit the stored colours to what the rest decodes to
     /// ([`colour_refit`]), kept only if the encoder's held-out views render closer to the
-    /// source. Codes the scene twice, plus the fit.
+    /// source. Codes the scene three times (first, then each of the two refits), plus the fit.
     pub refit_colours: bool,
 }
 
@@ -252,13 +252,16 @@ pub struct StreamEncoder<W: Write> {
 }
 
 /// The colour refit's judgement ([`EncoderConfig::refit_colours`]): mean PSNR against the
-/// source over [`colour_refit::holdout_views`], without and with the refit colours.
+/// source over [`colour_refit::holdout_views`], without and with the better of the two refits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RefitReport {
     pub before_db: f64,
     pub after_db: f64,
     /// Whether the refit coding was stored (it rendered closer).
     pub kept: bool,
+    /// Whether the better refit (`after_db`) was the one on the quantiser's levels, not the
+    /// continuous offsets rounded by the coder.
+    pub on_levels: bool,
 }
 
 impl<W: Write> StreamEncoder<W> {
@@ -555,27 +558,45 @@ impl<W: Write> StreamEncoder<W> {
         let limits = dlgs::limits::Limits::default();
         let scene = self.writer.scene();
         let decoded = sorted_grid::decode(payload, 0, scene, &limits)?.statics;
-        let offsets = colour_refit::fit(source, &decoded);
         // Part, and index within it, of each Gaussian of the parts' concatenation.
         let mut place = Vec::with_capacity(stored.len());
         for (p, (g, _)) in parts.iter().enumerate() {
             place.extend((0..g.len()).map(|i| (p, i)));
         }
         let mut refit: Vec<(dlgs::Gaussians, QuantBits)> = parts.to_vec();
-        for (k, (&j, &off)) in stored.iter().zip(&offsets).enumerate() {
+        let lattice = colour_refit::DcLattice::of_parts(parts);
+        let (steps, moves) = lattice.steps_and_moves(&decoded, stored, &place);
+        let fits = colour_refit::fit(source, &decoded, &steps, &moves);
+        let mut with_offsets: Vec<(dlgs::Gaussians, QuantBits)> = parts.to_vec();
+        for (k, (&j, &off)) in stored.iter().zip(&fits.offsets).enumerate() {
             let (p, i) = place[j as usize];
-            colour_refit::set_refit_dc(&mut refit[p].0, i, &decoded, k, off);
+            colour_refit::set_refit_dc(&mut with_offsets[p].0, i, &decoded, k, off);
         }
-        let (new_payload, new_stored) = code(&refit)?;
-        let redecoded = sorted_grid::decode(&new_payload, 0, scene, &limits)?.statics;
-        let scores = colour_refit::holdout_psnr(source, &[&decoded, &redecoded]);
-        let kept = scores[1] > scores[0];
+        for (k, (&j, m)) in stored.iter().zip(&fits.on_levels).enumerate() {
+            let (p, i) = place[j as usize];
+            lattice.set_dc(&mut refit[p].0, i, p, &decoded, k, *m);
+        }
+        let codings = [code(&with_offsets)?, code(&refit)?];
+        let mut redecoded = Vec::with_capacity(2);
+        for (payload, _) in &codings {
+            redecoded.push(sorted_grid::decode(payload, 0, scene, &limits)?.statics);
+        }
+        let scores = colour_refit::holdout_psnr(source, &[&decoded, &redecoded[0], &redecoded[1]]);
+        // The better refit, the levels' on a tie; stored only if it beats the first coding.
+        let best = if scores[1] > scores[2] { 1 } else { 2 };
+        let kept = scores[best] > scores[0];
         self.refit = Some(RefitReport {
             before_db: scores[0],
-            after_db: scores[1],
+            after_db: scores[best],
             kept,
+            on_levels: best == 2,
         });
-        Ok(kept.then_some((new_payload, new_stored)))
+        let [offsets_coding, levels_coding] = codings;
+        Ok(kept.then_some(if best == 2 {
+            levels_coding
+        } else {
+            offsets_coding
+        }))
     }
 
     fn dynamic_payloads(
