@@ -407,14 +407,9 @@ mod tests {
         // Targets rendered with every colour moved; the fit from the unmoved colours brings
         // the renders much closer, and gives the same offsets on one thread.
         let g = blob(150);
-        let mut moved = g.clone();
-        for (i, v) in moved.sh.iter_mut().enumerate() {
-            *v += 0.1 * ((i % 5) as f32 - 2.0);
-        }
         let cams = cams(&g, 6);
+        let targets = moved_targets(&g, &cams, |i| 0.1 * ((i % 5) as f32 - 2.0));
         let opts = RenderOptions::default();
-        let img = |g: &Gaussians, c: &Camera| render(g, c, &opts).unwrap().color;
-        let targets: Vec<Vec<f32>> = cams.iter().map(|c| img(&moved, c)).collect();
         let off = fit_colour_offsets(&g, &cams, &targets, opts.background, 8, 0.01);
         let one = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -428,13 +423,7 @@ mod tests {
                 fitted.sh[i * 3 + c] += o[c] / crate::sh::C0;
             }
         }
-        let mean = |g: &Gaussians| {
-            cams.iter()
-                .zip(&targets)
-                .map(|(c, t)| psnr(t, &img(g, c)))
-                .sum::<f64>()
-                / cams.len() as f64
-        };
+        let mean = |g: &Gaussians| mean_psnr(g, &cams, &targets);
         let (before, after) = (mean(&g), mean(&fitted));
         println!("{before:.2} -> {after:.2} dB");
         assert!(after > before + 10.0, "{before:.2} -> {after:.2} dB");
@@ -445,15 +434,9 @@ mod tests {
         // Targets with every colour moved by about a third of a wide step: rounding each fitted
         // offset alone leaves them where they are; the search moves some by a whole step.
         let g = blob(150);
-        let mut moved = g.clone();
-        for (i, v) in moved.sh.iter_mut().enumerate() {
-            *v += 0.12 * ((i % 3) as f32 - 1.0);
-        }
         let cams = cams(&g, 6);
-        let opts = RenderOptions::default();
-        let img = |g: &Gaussians, c: &Camera| render(g, c, &opts).unwrap().color;
-        let targets: Vec<Vec<f32>> = cams.iter().map(|c| img(&moved, c)).collect();
-        let bg = opts.background;
+        let targets = moved_targets(&g, &cams, |i| 0.12 * ((i % 3) as f32 - 1.0));
+        let bg = RenderOptions::default().background;
         let off = fit_colour_offsets(&g, &cams, &targets, bg, 8, 0.01);
         let step = 0.36 * crate::sh::C0;
         // Gaussian 0 may not move at all, channel 2 of every Gaussian only up by one step.
@@ -486,13 +469,7 @@ mod tests {
             }
             out
         };
-        let mean = |g: &Gaussians| {
-            cams.iter()
-                .zip(&targets)
-                .map(|(c, t)| psnr(t, &img(g, c)))
-                .sum::<f64>()
-                / cams.len() as f64
-        };
+        let mean = |g: &Gaussians| mean_psnr(g, &cams, &targets);
         let (before, at_rounding, at_search) =
             (mean(&g), mean(&apply(&rounded)), mean(&apply(&searched)));
         println!("{before:.2} dB, rounded {at_rounding:.2}, searched {at_search:.2}");
@@ -501,6 +478,32 @@ mod tests {
             at_search > at_rounding + 0.5,
             "{at_rounding:.2} -> {at_search:.2} dB"
         );
+    }
+
+    /// Renders from `cams` of `g` with SH coefficient `i` moved by `shift(i)`.
+    fn moved_targets(
+        g: &Gaussians,
+        cams: &[Camera],
+        shift: impl Fn(usize) -> f32,
+    ) -> Vec<Vec<f32>> {
+        let mut moved = g.clone();
+        for (i, v) in moved.sh.iter_mut().enumerate() {
+            *v += shift(i);
+        }
+        let opts = RenderOptions::default();
+        cams.iter()
+            .map(|c| render(&moved, c, &opts).unwrap().color)
+            .collect()
+    }
+
+    /// Mean PSNR of `g`'s renders from `cams` against `targets`.
+    fn mean_psnr(g: &Gaussians, cams: &[Camera], targets: &[Vec<f32>]) -> f64 {
+        let opts = RenderOptions::default();
+        cams.iter()
+            .zip(targets)
+            .map(|(c, t)| psnr(t, &render(g, c, &opts).unwrap().color))
+            .sum::<f64>()
+            / cams.len() as f64
     }
 
     fn render(g: &Gaussians, c: &Camera, o: &crate::RenderOptions) -> Result<crate::Image, String> {
