@@ -356,19 +356,15 @@ fn code_cells<C: BitCoder>(
         Mode::MixedTwo(k, k2) => code_mixed(coder, q, width, bits, k, k2, prev, prev2)?,
         Mode::TreeGivenPrevious(_) | Mode::Tree => {
             // The plain tree has one context; the other takes the previous cell's top `k` bits.
-            let (prev_cells, shift, contexts) = match (mode, prev) {
-                (Mode::TreeGivenPrevious(k), Some((pq, pb))) => {
-                    (Some(pq), pb.saturating_sub(k), 1usize << k.min(pb))
-                }
-                _ => (None, 0, 1),
+            let given = match (mode, prev) {
+                (Mode::TreeGivenPrevious(k), Some(p)) => Some(top_bits(p, k)),
+                _ => None,
             };
+            let contexts = given.as_ref().map_or(1, |g| g.0);
             let nodes = 1usize << b;
             let mut models = vec![Adaptive::NEW; contexts * nodes];
             for i in 0..q.len() {
-                // Previous cells fit their bits (checked when decoded); `min` keeps a bad
-                // caller from indexing past the models.
-                let ctx = prev_cells.map_or(0, |pq| ((pq[i] >> shift) as usize).min(contexts - 1));
-                let base = ctx * nodes;
+                let base = given.as_ref().map_or(0, |g| (g.1)(i)) * nodes;
                 let mut node = 1usize;
                 for level in (0..b).rev() {
                     let bit = q[i] >> level & 1 == 1;
