@@ -68,6 +68,46 @@ impl<'a> ByteReader<'a> {
             Err(Error::new(ErrorKind::NonFinite { field: what }, at))
         }
     }
+    /// An unsigned LEB128 varint of at most 5 bytes whose value fits a u32 (7 bits per byte,
+    /// least significant group first, high bit set on every byte but the last).
+    pub fn varint_u32(&mut self, what: &'static str) -> Result<u32> {
+        let at = self.offset();
+        let mut v = 0u64;
+        for i in 0..5 {
+            let b = self.u8(what)?;
+            v |= ((b & 0x7f) as u64) << (7 * i);
+            if b & 0x80 == 0 {
+                return u32::try_from(v).map_err(|_| {
+                    Error::new(
+                        ErrorKind::InvalidField {
+                            field: what,
+                            value: v,
+                            reason: "varint above u32",
+                        },
+                        at,
+                    )
+                });
+            }
+        }
+        Err(Error::new(
+            ErrorKind::InvalidField {
+                field: what,
+                value: v,
+                reason: "varint longer than 5 bytes",
+            },
+            at,
+        ))
+    }
+    /// A finite IEEE binary16 value, widened (exactly) to f32.
+    pub fn finite_f16(&mut self, what: &'static str) -> Result<f32> {
+        let at = self.offset();
+        let v = half::f16::from_bits(self.u16(what)?).to_f32();
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(Error::new(ErrorKind::NonFinite { field: what }, at))
+        }
+    }
     /// `n` little-endian f32 values; the length is checked before allocating.
     pub fn f32_vec(&mut self, n: usize, what: &'static str) -> Result<Vec<f32>> {
         let bytes = n.checked_mul(4).ok_or_else(|| {
@@ -92,6 +132,8 @@ pub trait PutLe {
     fn put_u64(&mut self, v: u64);
     fn put_f32(&mut self, v: f32);
     fn put_f32s(&mut self, v: &[f32]);
+    /// Unsigned LEB128, the writer side of [`ByteReader::varint_u32`].
+    fn put_varint(&mut self, v: u32);
 }
 
 impl PutLe for Vec<u8> {
@@ -116,6 +158,13 @@ impl PutLe for Vec<u8> {
             self.extend_from_slice(&x.to_le_bytes());
         }
     }
+    fn put_varint(&mut self, mut v: u32) {
+        while v >= 0x80 {
+            self.push(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.push(v as u8);
+    }
 }
 
 /// Decompress one zstd frame that must yield exactly `len` bytes (never more is allocated);
@@ -130,4 +179,36 @@ pub fn zstd_exact(data: &[u8], len: u64, at: u64) -> Result<Vec<u8>> {
         ));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn varints_round_trip_and_reject_overlong_or_wide_values() {
+        for v in [0u32, 1, 127, 128, 300, 16_383, 16_384, u32::MAX] {
+            let mut b = Vec::new();
+            b.put_varint(v);
+            assert_eq!(
+                b.len(),
+                1 + (32 - v.leading_zeros()).saturating_sub(1) as usize / 7
+            );
+            let mut r = ByteReader::new(&b, 0);
+            assert_eq!(r.varint_u32("v").unwrap(), v);
+            assert_eq!(r.remaining(), 0);
+        }
+        // 2^32 in five bytes, six continuation bytes, and a varint cut short.
+        for bad in [&[0x80, 0x80, 0x80, 0x80, 0x10][..], &[0xff; 6], &[0x80]] {
+            assert!(ByteReader::new(bad, 0).varint_u32("v").is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn f16_values_widen_exactly_and_non_finite_ones_are_errors() {
+        let b = [0x00, 0x3c, 0x00, 0x7c]; // 1.0, +inf
+        let mut r = ByteReader::new(&b, 0);
+        assert_eq!(r.finite_f16("x").unwrap(), 1.0);
+        assert!(r.finite_f16("x").is_err());
+    }
 }

@@ -29,6 +29,7 @@ fn bench(c: &mut Criterion) {
             dynamics: &canon.dynamics,
             dynamic_bits: &QuantBits::HIGH,
             rotation_coarsening,
+            compact_records: true,
         };
         sorted_grid::encode_octree(&gop, 9).unwrap().0
     };

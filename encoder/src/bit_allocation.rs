@@ -122,6 +122,7 @@ impl Judge {
                 dynamics: &self.canon.dynamics,
                 dynamic_bits: bits,
                 rotation_coarsening: self.coarsening,
+                compact_records: true,
             };
             sorted_grid::encode_octree(&gop, self.zstd_level)?.0
         } else {

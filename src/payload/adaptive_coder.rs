@@ -233,7 +233,7 @@ pub enum Mode {
     /// of the previous channel's top `k` bits ([`bit_mixer`](super::bit_mixer), since 1.13).
     Mixed(u8),
     /// As `Mixed(k)` with `k > 0`, plus a model in the context of the previous channel's top
-    /// `k` bits together with the top `k2` bits of the channel before it (since 1.14): a
+    /// `k` bits together with the top `k2` bits of the channel before it (since 1.13): a
     /// Gaussian's third colour or log-scale follows the other two.
     MixedTwo(u8, u8),
 }

@@ -6,6 +6,7 @@ pub mod bit_mixer;
 pub mod delta_residual;
 pub mod grid_coder;
 pub mod grid_shaping;
+pub mod half_range;
 pub mod kd_layout;
 pub mod lang_decoder;
 pub mod mlp_weights;

@@ -84,27 +84,33 @@ pub fn all() -> Vec<Vector> {
     ];
     v.push(Vector {
         name: "lod3-csog-medium",
-        bytes: csog(&lod3, Vec::new(), false, None),
+        bytes: csog(&lod3, Vec::new(), false, None, false),
         error: None,
         about: "the lod3 scene as sorted quantised grids (CSOG layout 0, grid positions, preset medium, default sort)",
     });
     v.push(Vector {
         name: "lod3-csog-tiered",
-        bytes: csog(&lod3, vec![0.1, 0.02], false, None),
+        bytes: csog(&lod3, vec![0.1, 0.02], false, None, false),
         error: None,
         about: "the lod3 scene as CSOG layout 1 (since 1.8, grid positions): preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser and those holding 2 % two bits coarser, three parts; the empty dynamic set as 0 parts (since 1.12)",
     });
     v.push(Vector {
         name: "lod3-csog-octree",
-        bytes: csog(&lod3, vec![0.1], true, None),
+        bytes: csog(&lod3, vec![0.1], true, None, false),
         error: None,
         about: "the lod3 scene as CSOG layout 2 (since 1.10): octree positions, the order derived from them; preset medium, the least important Gaussians holding 10 % of the blending weight one bit coarser, two parts",
     });
     v.push(Vector {
         name: "lod3-csog-coarse-rot",
-        bytes: csog(&lod3, vec![0.1], true, Some(COARSE_ROTATIONS)),
+        bytes: csog(&lod3, vec![0.1], true, Some(COARSE_ROTATIONS), false),
         error: None,
         about: "the lod3 scene as CSOG layout 3 (since 1.11): lod3-csog-octree with coarse rotations (factor 16, max shift 4): each part's small Gaussians store rotations up to 4 bits coarser, the rotation records' cells grouped by shift",
+    });
+    v.push(Vector {
+        name: "lod3-csog-compact",
+        bytes: csog(&lod3, vec![0.1], true, Some(COARSE_ROTATIONS), true),
+        error: None,
+        about: "the lod3 scene as CSOG layout 4 (since 1.14): lod3-csog-coarse-rot in compact records (varint counts and lengths, binary16 ranges, no word counts); what `dlgs encode` writes by default",
     });
     v.push(Vector {
         name: DYNAMIC_VECTOR,
@@ -467,7 +473,7 @@ pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
 }
 
 /// The lod3 scene as a still `CSOG` at preset medium with these importance tiers, with octree
-/// positions (layout 2) or grid positions (layouts 0 and 1).
+/// positions (layouts 2-4) or grid positions (layouts 0 and 1).
 /// The coarse-rotation vector's setting: a large factor, so every shift class occurs in lod3.
 pub const COARSE_ROTATIONS: dlgs::payload::sorted_grid::RotationCoarsening =
     dlgs::payload::sorted_grid::RotationCoarsening {
@@ -480,6 +486,7 @@ fn csog(
     tier_weights: Vec<f64>,
     octree_positions: bool,
     rotation_coarsening: Option<dlgs::payload::sorted_grid::RotationCoarsening>,
+    compact_records: bool,
 ) -> Vec<u8> {
     use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
     let cfg = EncoderConfig {
@@ -490,6 +497,7 @@ fn csog(
         tier_weights,
         octree_positions,
         rotation_coarsening,
+        compact_records,
         // lod3's bands 1-3 are zero everywhere; the vectors keep their channel records.
         trim_zero_sh_bands: false,
         ..Default::default()

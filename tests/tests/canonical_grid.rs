@@ -108,15 +108,16 @@ fn errors_stay_within_half_a_step() {
     let floor = robust_radius(&g.positions).unwrap().ln() - LOG_SCALE_BELOW_RADIUS;
     for a in 0..3 {
         let (b, lo, hi, _) = q.channels[3 + a];
+        // The binary16 ends (§6.5.7) may lower the minimum by under half a step.
+        let step = (hi - lo) / ((1u32 << b) - 1) as f32;
         assert!(
-            lo >= hi - LOG_SCALE_SPAN - 1e-4 && lo >= floor - 1e-4,
+            lo >= hi - LOG_SCALE_SPAN - step / 2.0 && lo >= floor - step / 2.0,
             "axis {a}: range {lo}..{hi}"
         );
         assert!(
             lo < floor + 1e-4,
             "axis {a}: the radius floor sets the minimum here"
         );
-        let step = (hi - lo) / ((1u32 << b) - 1) as f32;
         let mut raised = 0;
         for i in 0..g.len() {
             let (v, dv) = (g.log_scales[i][a], d.log_scales[i][a]);
@@ -583,9 +584,10 @@ fn sh_bands_that_are_zero_everywhere_are_left_out_without_changing_a_pixel() {
     let (trimmed_bytes, trimmed) = encode(true);
     println!("SH 3 kept {kept_bytes} B, trimmed to SH 0 {trimmed_bytes} B");
     assert_eq!((kept.sh_degree, trimmed.sh_degree), (3, 0));
-    // 45 band channel records of at least 14 bytes each are gone; nothing else changes.
+    // 45 band channel records of at least 6 bytes each (layout 4's head, binary16 range and
+    // length, §6.5.7) are gone; nothing else changes.
     assert!(
-        kept_bytes >= trimmed_bytes + 45 * 14,
+        kept_bytes >= trimmed_bytes + 45 * 6,
         "{kept_bytes} vs {trimmed_bytes}"
     );
     assert_eq!(trimmed.positions, kept.positions);
@@ -805,8 +807,8 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
         err(&b)
     );
     let mut b = p.clone();
-    b[0] = 4;
-    assert!(err(&b).contains("layout version 4"), "{}", err(&b));
+    b[0] = 5;
+    assert!(err(&b).contains("layout version 5"), "{}", err(&b));
     // Since 1.12 the empty dynamic set is its part count alone, 0; a scene that declares
     // dynamic Gaussians cannot have none.
     assert_eq!(p.last(), Some(&0));
@@ -896,6 +898,11 @@ fn octree_lod3() -> OctreeGop {
 
 /// [`octree_lod3`], in layout 3 when `coarsening` is set.
 fn octree_lod3_with(coarsening: Option<RotationCoarsening>) -> OctreeGop {
+    octree_lod3_framed(coarsening, false)
+}
+
+/// [`octree_lod3_with`], in layout 4 (compact records) when `compact`.
+fn octree_lod3_framed(coarsening: Option<RotationCoarsening>, compact: bool) -> OctreeGop {
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let cut = |r: std::ops::Range<u32>| permute(&g, &r.collect::<Vec<u32>>());
     let parts = vec![
@@ -910,6 +917,7 @@ fn octree_lod3_with(coarsening: Option<RotationCoarsening>) -> OctreeGop {
         dynamics: &dynamics,
         dynamic_bits: &QuantBits::HIGH,
         rotation_coarsening: coarsening,
+        compact_records: compact,
     };
     let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
     let c = Canonical {
@@ -1021,6 +1029,125 @@ fn damaged_octree_sets_give_typed_errors_not_panics() {
         s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
         let mut b = p.clone();
         let at = 41 + (s as usize >> 8) % 4000;
+        b[at] ^= 1 << (s % 8);
+        let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
+    }
+}
+
+/// An unsigned LEB128 varint at `p[at..]`: (value, bytes).
+fn varint(p: &[u8], at: usize) -> (u32, usize) {
+    let mut v = 0u32;
+    for i in 0..5 {
+        v |= ((p[at + i] & 0x7f) as u32) << (7 * i);
+        if p[at + i] & 0x80 == 0 {
+            return (v, i + 1);
+        }
+    }
+    panic!("varint longer than 5 bytes at {at}");
+}
+
+/// `v` as a varint of exactly `n` bytes (readers accept padded varints).
+fn padded_varint(v: u32, n: usize) -> Vec<u8> {
+    (0..n)
+        .map(|i| (v >> (7 * i)) as u8 & 0x7f | if i + 1 < n { 0x80 } else { 0 })
+        .collect()
+}
+
+/// Byte offsets of the first static part's channel records in a layout-4 payload (§6.5.7),
+/// from log-scale x on: (offset of `head`, offset of `len`).
+fn compact_records(p: &[u8], channels: usize) -> Vec<(usize, usize)> {
+    let (_, n) = varint(p, 2); // layout, part count, the part's Gaussian count
+    let mut at = 2 + n;
+    let h = p[at] >> 7;
+    at += 1 + if h == 1 { 12 } else { 24 };
+    let (len, n) = varint(p, at);
+    at += n + len as usize + 5; // the octree, then max shift and threshold
+    let mut out = Vec::new();
+    for j in 3..channels {
+        let head = p[at];
+        let range = match (j == 6, head >> 7) {
+            (true, _) => 0, // the rotation index has no range
+            (false, 1) => 4,
+            (false, _) => 8,
+        };
+        let len_at = at + 1 + range;
+        let (len, n) = varint(p, len_at);
+        out.push((at, len_at));
+        at = len_at + n + len as usize;
+    }
+    out
+}
+
+#[test]
+fn compact_records_decode_to_layout_3s_gaussians_in_fewer_bytes() {
+    // Layout 4 (format 1.14): layout 3's streams and cells in tighter records.
+    let (c, _, p3, order3) = octree_lod3_with(Some(COARSE));
+    let (_, _, p4, order4) = octree_lod3_framed(Some(COARSE), true);
+    assert_eq!((p3[0], p4[0]), (3, 4), "layouts");
+    assert_eq!(order4, order3, "the order follows the positions alone");
+    let scene = scene_of(&c);
+    let body = |p: &[u8]| {
+        let d = sorted_grid::decode(p, 0, &scene, &Limits::default()).unwrap();
+        dlgs::payload::raw_canonical::canonical_body(&d)
+    };
+    assert_eq!(body(&p4), body(&p3), "the same Gaussians, bit for bit");
+    // Every record saves at least its second head byte and a length byte (all are under 2 MB),
+    // every set its width and channel count (6 bytes): 3 static parts of 56 records after the
+    // octree, one dynamic part of 59 (SH 3, no language).
+    let channels = 59;
+    let least = 3 * (6 + 2 * (channels - 3)) + 6 + 2 * channels;
+    assert!(
+        p3.len() >= p4.len() + least,
+        "layout 3 {} B, layout 4 {} B",
+        p3.len(),
+        p4.len()
+    );
+    // Deterministic on any thread count.
+    let run = |n: usize| on_threads(n, || body(&p4));
+    assert_eq!(run(1), run(3));
+}
+
+#[test]
+fn damaged_compact_records_give_typed_errors_not_panics() {
+    let (c, _, p, _) = octree_lod3_framed(Some(COARSE), true);
+    let scene = scene_of(&c);
+    let err = |b: &[u8]| match sorted_grid::decode(b, 0, &scene, &Limits::default()) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a damaged payload decoded"),
+    };
+    let records = compact_records(&p, 59);
+    // A codec this version does not define (the head's bits 4-6).
+    let (head, _) = records[0];
+    let mut b = p.clone();
+    b[head] = b[head] & 0x8f | 6 << 4;
+    assert!(err(&b).contains("unknown grid codec 6"), "{}", err(&b));
+    // The rotation index record flagging a range it does not have.
+    let (index, _) = records[3];
+    let mut b = p.clone();
+    b[index] |= 0x80;
+    assert!(err(&b).contains("no range to flag"), "{}", err(&b));
+    // A codec-5 stream that is not whole words.
+    let (_, len_at) = *records
+        .iter()
+        .find(|&&(h, _)| p[h] >> 4 & 7 == 5)
+        .expect("a codec-5 record");
+    let (len, n) = varint(&p, len_at);
+    let mut b = p.clone();
+    b.splice(len_at..len_at + n, padded_varint(len - 1, n));
+    assert!(err(&b).contains("whole 32-bit words"), "{}", err(&b));
+    // A part count varint of 6 bytes, and the payload cut anywhere.
+    let mut b = p.clone();
+    b.splice(2..2, [0x80; 5]);
+    assert!(err(&b).contains("varint"), "{}", err(&b));
+    for cut in (0..p.len()).step_by(97) {
+        let _ = err(&p[..cut]);
+    }
+    // Flipped bits anywhere in the first part: an error or a different set, never a panic.
+    let mut s = 7u32;
+    for _ in 0..300 {
+        s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        let mut b = p.clone();
+        let at = 2 + (s as usize >> 8) % 4000;
         b[at] ^= 1 << (s % 8);
         let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
     }
@@ -1146,9 +1273,10 @@ fn degenerate_gaussians_decode_finite_in_coarse_rotation_sets() {
         dynamics: &empty,
         dynamic_bits: &QuantBits::LOW,
         rotation_coarsening: Some(RotationCoarsening::DEFAULT),
+        compact_records: true,
     };
     let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
-    assert_eq!(p[0], 3, "layout 3");
+    assert_eq!(p[0], 4, "layout 4: layout 3 in compact records");
     let c = Canonical::from_static(g);
     let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default())
         .unwrap()
