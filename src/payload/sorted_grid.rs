@@ -723,7 +723,8 @@ fn shape_channels(
     }
 }
 
-/// Bytes of a channel record before its data: bits, codec, min, max, len (§6.5.2).
+/// Bytes of a channel record before its data in layouts 0-3: bits, codec, min, max, len
+/// (§6.5.2); [`breakdown`] counts records this way (layout 4's take 3-10, §6.5.7).
 const CHANNEL_HEADER_LEN: usize = 14;
 /// Bytes of an octree set's position record before the octree: bits, three ranges, len.
 const OCTREE_HEADER_LEN: usize = 29;
@@ -819,8 +820,9 @@ fn put_compact_record(out: &mut Vec<u8>, c: &Channel, is_index: bool) {
     }
 }
 
-/// Coded bytes per attribute group of one set, for reports: (group name, bytes). With
-/// `octree`, the octree is counted as the first position channel.
+/// Coded bytes per attribute group of one set, for reports: (group name, bytes), each record
+/// with its layout 0-3 header. With `octree`, the octree is counted as the first position
+/// channel.
 pub fn breakdown(
     g: &Gaussians,
     bits: &QuantBits,
