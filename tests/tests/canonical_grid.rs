@@ -997,6 +997,19 @@ fn octree_sets_decode_the_same_floats_on_any_thread_count() {
     }
 }
 
+/// Decode `p` 300 times, each with one bit flipped at a pseudo-random byte (seeded by `seed`) in
+/// the 4,000 bytes from `from`: damaged payloads must give an error or some set, never a panic.
+fn decode_with_flipped_bits(p: &[u8], scene: &SceneHeader, from: usize, seed: u32) {
+    let mut s = seed;
+    for _ in 0..300 {
+        s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        let mut b = p.to_vec();
+        let at = from + (s as usize >> 8) % 4000;
+        b[at] ^= 1 << (s % 8);
+        let _ = sorted_grid::decode(&b, 0, scene, &Limits::default());
+    }
+}
+
 #[test]
 fn damaged_octree_sets_give_typed_errors_not_panics() {
     let (c, _, p, _) = octree_lod3();
@@ -1024,14 +1037,7 @@ fn damaged_octree_sets_give_typed_errors_not_panics() {
     b[37..41].copy_from_slice(&u32::MAX.to_le_bytes());
     assert!(err(&b).contains("octree data"), "{}", err(&b));
     // Flipped bits anywhere in the first part: an error or a different set, never a panic.
-    let mut s = 5u32;
-    for _ in 0..300 {
-        s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-        let mut b = p.clone();
-        let at = 41 + (s as usize >> 8) % 4000;
-        b[at] ^= 1 << (s % 8);
-        let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
-    }
+    decode_with_flipped_bits(&p, &scene, 41, 5);
 }
 
 /// An unsigned LEB128 varint at `p[at..]`: (value, bytes).
@@ -1143,14 +1149,7 @@ fn damaged_compact_records_give_typed_errors_not_panics() {
         let _ = err(&p[..cut]);
     }
     // Flipped bits anywhere in the first part: an error or a different set, never a panic.
-    let mut s = 7u32;
-    for _ in 0..300 {
-        s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-        let mut b = p.clone();
-        let at = 2 + (s as usize >> 8) % 4000;
-        b[at] ^= 1 << (s % 8);
-        let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
-    }
+    decode_with_flipped_bits(&p, &scene, 2, 7);
 }
 
 /// Layout 3 of [`octree_lod3`] with a large factor, so every shift class occurs.
