@@ -477,7 +477,7 @@ fn encode_to_target(
     out: &mut impl std::io::Write,
     verbose: bool,
 ) -> Result<()> {
-    use dlgs_encoder::quality_search::smallest_at;
+    use dlgs_encoder::quality_search::{compare_views_psnr, smallest_at};
     if !(target.is_finite() && target > 0.0) {
         bail!("--target-psnr takes a PSNR in dB > 0, got {target}");
     }
@@ -542,6 +542,14 @@ fn encode_to_target(
                     "  the same file from options: {}",
                     found.trials[i].options(&found.groups)
                 );
+                let held_out = compare_views_psnr(g, &file)?;
+                println!("  on `dlgs compare`'s 8 default views (not searched): {held_out:.2} dB");
+                if held_out < target {
+                    println!(
+                        "  (under the target there: the smallest file to clear it on the search's \
+                         views is, by selection, lucky on them: a slightly higher target leaves a margin)"
+                    );
+                }
             }
             out.write_all(&file)?
         }

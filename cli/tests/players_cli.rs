@@ -446,6 +446,24 @@ fn target_psnr_keeps_the_smallest_candidate_at_the_target_or_stores_lossless() {
         .as_f64()
         .unwrap();
     assert!(bench > 43.0, "{bench} dB");
+    // The search reports the file's PSNR on `dlgs compare`'s default views, which it never
+    // measured: the same number `dlgs compare` gives.
+    let held_out: f64 = text
+        .lines()
+        .find_map(|l| {
+            l.trim()
+                .strip_prefix("on `dlgs compare`'s 8 default views (not searched): ")
+        })
+        .and_then(|v| v.trim_end_matches(" dB").parse().ok())
+        .unwrap_or_else(|| panic!("{text}"));
+    let cmp = dlgs(&["compare", scene, out, "--json"]);
+    let compared: f64 = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (held_out - compared).abs() < 0.006,
+        "{held_out} vs {compared}"
+    );
     // Out of reach of every preset: the scene is stored lossless.
     let text = dlgs(&["encode", scene, "-o", out, "--target-psnr", "150"]);
     assert!(text.contains("storing the scene lossless"), "{text}");
