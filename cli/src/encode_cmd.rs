@@ -75,6 +75,13 @@ pub struct CodecArgs {
     /// name should not travel with them, or where every byte counts.
     #[arg(long)]
     pub no_meta: bool,
+    /// Lossy canonical coding: leave out codec 5's mixed-context modes, which code some
+    /// channels 1-5 % smaller but decode about 3 times slower per channel. The same quantised
+    /// values (so the same PSNR) in files 1.5-3.1 % larger that decode in about half the time
+    /// (273k Gaussians: 119-124 instead of 234-236 ms on 2 cores; BENCHMARKS.md "Mixed
+    /// contexts"). Format unchanged: every reader decodes both.
+    #[arg(long)]
+    pub fast_decode: bool,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
     /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
@@ -237,6 +244,12 @@ impl CodecArgs {
                      --quality (or --bits, or --target-psnr)"
                 )
             }
+            ("lossless", None) if self.fast_decode => {
+                bail!(
+                    "--fast-decode chooses among the lossy grid codings: give a lossy --quality \
+                     (or --bits, or --target-psnr)"
+                )
+            }
             ("lossless", None) => return Ok(CanonicalCodec::Raw),
             ("lossless", Some(_)) => QuantBits::HIGH,
             (q, _) => QuantBits::preset(q).with_context(|| {
@@ -380,6 +393,7 @@ impl CodecArgs {
             drop_invisible: !self.keep_invisible,
             trim_zero_sh_bands: !self.keep_sh_degree,
             compact_records: true,
+            mixed_contexts: !self.fast_decode,
             reallocate_bits: self.reallocate_bits,
             shape_tolerance: self.shape,
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
@@ -539,8 +553,13 @@ fn encode_to_target(
         Some((i, file)) => {
             if verbose {
                 println!(
-                    "  the same file from options: {}",
-                    found.trials[i].options(&found.groups)
+                    "  the same file from options: {}{}",
+                    found.trials[i].options(&found.groups),
+                    if codec.fast_decode {
+                        " --fast-decode"
+                    } else {
+                        ""
+                    }
                 );
                 let held_out = compare_views_psnr(g, &file)?;
                 println!("  on `dlgs compare`'s 8 default views (not searched): {held_out:.2} dB");

@@ -317,6 +317,38 @@ fn encode_octree_positions_by_default_and_grid_positions_on_request() {
 }
 
 #[test]
+fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
+    // `--fast-decode` leaves codec 5's mixed modes out: on this real scene at `high` the
+    // default takes them (the file is smaller) and both decode to the same Gaussians, octree
+    // positions and grid positions (layout 1 then, one part) alike.
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data(SCENE);
+    let scene = scene.to_str().unwrap();
+    let path = |n: &str| tmp.path().join(n).to_str().unwrap().to_owned();
+    let size = |p: &str| std::fs::metadata(p).unwrap().len();
+    let ply = |f: &str| {
+        let p = format!("{f}.ply");
+        dlgs(&["decode", f, "-o", &p]);
+        std::fs::read(p).unwrap()
+    };
+    for extra in [&[][..], &["--grid-positions"][..]] {
+        let (mixed, fast) = (path("mixed.dlgs"), path("fast.dlgs"));
+        let e = ["encode", scene, "--quality", "high", "--no-meta"];
+        dlgs(&[&e[..], &["-o", &mixed], extra].concat());
+        dlgs(&[&e[..], &["-o", &fast, "--fast-decode"], extra].concat());
+        assert!(
+            size(&mixed) < size(&fast),
+            "{extra:?}: {} vs {}",
+            size(&mixed),
+            size(&fast)
+        );
+        assert!(ply(&mixed) == ply(&fast), "{extra:?}");
+    }
+    let err = dlgs_fails(&["encode", scene, "-o", &path("x.dlgs"), "--fast-decode"]);
+    assert!(err.contains("lossy --quality"), "{err}");
+}
+
+#[test]
 fn a_failed_encode_leaves_no_file_and_an_in_place_re_encode_reads_its_input_first() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = dlgs_tests::data(SCENE);

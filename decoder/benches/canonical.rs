@@ -1,9 +1,11 @@
 //! Canonical-state decoding on real data: the `CSOG` payload of the real plant scene (113,648
-//! Gaussians) at `high`, with grid positions (layout 0), octree positions (layout 2, since
-//! format 1.10) and octree positions with coarse rotations (layout 3, the default since 1.11), and a GENERATED binary voxel residual field (`RNTC`, the reference's
-//! shapes; no trained DLGStream model exists here) applied to that scene, 1 and 2 threads.
-//! Also each codec-5 mode on one real channel (the plant's SH DC blue at `high`, given green and
-//! red), 1 thread: what the mixed modes (5 and 6, since format 1.13) cost against the trees.
+//! Gaussians) at `high`, with grid positions (layout 0), octree positions (in compact records:
+//! layout 4 since format 1.14) and octree positions with coarse rotations (the default; also as
+//! `dlgs encode --fast-decode` writes it, without codec 5's mixed modes), and a GENERATED binary
+//! voxel residual field (`RNTC`, the reference's shapes; no trained DLGStream model exists here)
+//! applied to that scene, 1 and 2 threads. Also each codec-5 mode on one real channel (the
+//! plant's SH DC blue at `high`, given green and red), 1 thread: what the mixed modes (5 and 6,
+//! since format 1.13) cost against the trees.
 //! `cargo bench -p dlgs-decoder --bench canonical`
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -22,7 +24,7 @@ fn bench(c: &mut Criterion) {
     let canon = Canonical::from_static(sorted);
     let payload = sorted_grid::encode(&canon, &QuantBits::HIGH, 9).unwrap();
     let part = [(g.clone(), QuantBits::HIGH)];
-    let octree_payload = |rotation_coarsening| {
+    let octree_payload = |rotation_coarsening, mixed_contexts| {
         let gop = sorted_grid::PartedGop {
             static_parts: &part,
             static_weight: None,
@@ -30,11 +32,14 @@ fn bench(c: &mut Criterion) {
             dynamic_bits: &QuantBits::HIGH,
             rotation_coarsening,
             compact_records: true,
+            mixed_contexts,
         };
         sorted_grid::encode_octree(&gop, 9).unwrap().0
     };
-    let octree = octree_payload(None);
-    let coarse = octree_payload(Some(RotationCoarsening::DEFAULT));
+    let octree = octree_payload(None, true);
+    let coarse = octree_payload(Some(RotationCoarsening::DEFAULT), true);
+    // `dlgs encode --fast-decode`: the default layout without codec 5's mixed modes.
+    let fast = octree_payload(Some(RotationCoarsening::DEFAULT), false);
     let scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     let field = synth_ntc(
         &canon,
@@ -64,6 +69,12 @@ fn bench(c: &mut Criterion) {
         group.bench_function(format!("csog_high_coarse_decode/{threads}t"), |b| {
             b.iter(|| {
                 pool.install(|| sorted_grid::decode(&coarse, 0, &scene, &Limits::default()))
+                    .unwrap()
+            })
+        });
+        group.bench_function(format!("csog_high_fast_decode/{threads}t"), |b| {
+            b.iter(|| {
+                pool.install(|| sorted_grid::decode(&fast, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });

@@ -123,6 +123,9 @@ impl Judge {
                 dynamic_bits: bits,
                 rotation_coarsening: self.coarsening,
                 compact_records: true,
+                // Bytes judged as the default coder makes them, also under `--fast-decode`
+                // (which adds a few percent to every candidate alike).
+                mixed_contexts: true,
             };
             sorted_grid::encode_octree(&gop, self.zstd_level)?.0
         } else {

@@ -201,6 +201,10 @@ pub struct EncoderConfig {
     /// and 3's; about 120 bytes fewer per part at SH 0. `false` only to write the older
     /// layouts (the conformance vectors).
     pub compact_records: bool,
+    /// Lossy (`CSOG`) scenes: let channels take codec 5's mixed-context modes where they code
+    /// smallest (format 1.13). `false` (`dlgs encode --fast-decode`): the same values in files
+    /// 1.5-3.1 % larger that decode in about half the time (BENCHMARKS.md "Mixed contexts").
+    pub mixed_contexts: bool,
     /// Lossy (`CSOG`) still scenes: fit the stored colours to what the rest decodes to
     /// ([`colour_refit`]), kept only if the encoder's held-out views render closer to the
     /// source. Codes the scene three times (first, then each of the two refits), plus the fit.
@@ -231,6 +235,7 @@ impl Default for EncoderConfig {
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
             compact_records: true,
+            mixed_contexts: true,
             refit_colours: false,
         }
     }
@@ -502,6 +507,7 @@ impl<W: Write> StreamEncoder<W> {
                 let zstd_level = self.cfg.zstd_level;
                 let coarsening = self.cfg.rotation_coarsening;
                 let compact_records = self.cfg.compact_records;
+                let mixed_contexts = self.cfg.mixed_contexts;
                 // The payload of `parts`, and per decoded static Gaussian its index in the
                 // parts' concatenation.
                 let code = |parts: &[(dlgs::Gaussians, QuantBits)]| -> Result<(Vec<u8>, Vec<u32>)> {
@@ -512,11 +518,14 @@ impl<W: Write> StreamEncoder<W> {
                         dynamic_bits: &bits,
                         rotation_coarsening: coarsening,
                         compact_records,
+                        mixed_contexts,
                     };
                     let identity = || (0..statics.len() as u32).collect();
                     Ok(if octree {
                         sorted_grid::encode_octree(&gop, zstd_level)?
-                    } else if parts.len() > 1 {
+                    } else if parts.len() > 1 || !mixed_contexts {
+                        // Layout 0 (`encode_shaped`) always lets channels mix; layout 1,
+                        // here with one part, follows `mixed_contexts`.
                         (
                             sorted_grid::encode_grid_parts(&gop, zstd_level)?,
                             identity(),

@@ -10,7 +10,7 @@ use constriction::stream::model::ContiguousCategoricalEntropyModel;
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
 use constriction::stream::{Decode, Encode};
 
-use super::adaptive_coder::{self, Previous};
+use super::adaptive_coder::{self, Mode, Previous};
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::{ErrorKind, Result};
 
@@ -487,7 +487,9 @@ pub const MIXED_MARGIN: f64 = 0.01;
 /// Encode with whichever codec is smallest for this channel: codecs 0-4
 /// ([`encode_best_tabled`]) and every usable mode of codec 5, preferring by
 /// [`DEPENDENT_MARGIN`] those that decode without the previous channel (`prev`; `prev2` is
-/// the channel before it, for codec 5 mode 6) and by [`MIXED_MARGIN`] the others.
+/// the channel before it, for codec 5 mode 6) and by [`MIXED_MARGIN`] the others. Without
+/// `mixing`, codec 5's mixed modes (5 and 6) are not tried: the file decodes faster for a few
+/// percent more bytes (`dlgs encode --fast-decode`, BENCHMARKS.md "Mixed contexts").
 pub fn encode_best(
     q: &[u16],
     prev: Previous,
@@ -495,6 +497,7 @@ pub fn encode_best(
     width: usize,
     bits: u8,
     zstd_level: i32,
+    mixing: bool,
 ) -> (GridCodec, Vec<u8>) {
     // Codecs 0-3 never need the previous channel; codec 4 always does.
     let plain = encode_best_tabled(q, None, width, bits, zstd_level);
@@ -506,6 +509,9 @@ pub fn encode_best(
         candidates.push((true, GridCodec::HistogramDelta, d));
     }
     for mode in adaptive_coder::candidate_modes(bits, prev, prev2) {
+        if !mixing && matches!(mode, Mode::Mixed(_) | Mode::MixedTwo(..)) {
+            continue;
+        }
         if let Some(d) = adaptive_coder::encode(q, prev, prev2, width, bits, mode) {
             candidates.push((mode.needs_previous(), GridCodec::Adaptive, d));
         }

@@ -543,6 +543,7 @@ fn code_set(
     weight: Option<&[f32]>,
     octree: bool,
     coarsen: Option<RotationCoarsening>,
+    mixing: bool,
 ) -> CodedSet {
     let w = grid_width(g.len()).max(1);
     let mut chans = quantise_set(g, bits).channels;
@@ -636,7 +637,7 @@ fn code_set(
                     .map(|p| (chans[p].3.as_slice(), chans[p].0))
             };
             let (codec, data) =
-                grid_coder::encode_best(q, earlier(1), earlier(2), w, *b, zstd_level);
+                grid_coder::encode_best(q, earlier(1), earlier(2), w, *b, zstd_level, mixing);
             Channel {
                 bits: *b,
                 min: *min,
@@ -741,8 +742,9 @@ fn encode_set(
     octree: bool,
     coarsen: Option<RotationCoarsening>,
     compact: bool,
+    mixing: bool,
 ) -> Vec<u32> {
-    let coded = code_set(g, bits, zstd_level, weight, octree, coarsen);
+    let coded = code_set(g, bits, zstd_level, weight, octree, coarsen, mixing);
     if !compact {
         out.put_u32(grid_width(g.len()) as u32);
         out.put_u16(coded.channels.len() as u16);
@@ -830,7 +832,7 @@ pub fn breakdown(
     octree: bool,
 ) -> Vec<(&'static str, usize)> {
     let kinds = channels(g);
-    let coded = code_set(g, bits, zstd_level, None, octree, None);
+    let coded = code_set(g, bits, zstd_level, None, octree, None, true);
     let tree = coded
         .octree
         .as_ref()
@@ -907,6 +909,7 @@ pub fn encode_shaped(
         false,
         None,
         false,
+        true,
     );
     encode_set(
         &mut out,
@@ -917,6 +920,7 @@ pub fn encode_shaped(
         false,
         None,
         false,
+        true,
     );
     Ok(out)
 }
@@ -940,6 +944,7 @@ pub fn encode_parts(
         dynamic_bits,
         rotation_coarsening: None,
         compact_records: false,
+        mixed_contexts: true,
     };
     encode_grid_parts(&parts, zstd_level)
 }
@@ -964,6 +969,9 @@ pub struct PartedGop<'a> {
     /// With octree positions: layout 4's compact records (§6.5.7, since 1.14) instead of
     /// layouts 2 and 3's.
     pub compact_records: bool,
+    /// Let channels take codec 5's mixed-context modes (5 and 6, since 1.13) where they are
+    /// smallest; `false` leaves them out for faster decoding (`dlgs encode --fast-decode`).
+    pub mixed_contexts: bool,
 }
 
 /// Encode a canonical GOP in layout 2 (§6.5.2, since 1.10): as [`encode_parts`], but each
@@ -1023,7 +1031,17 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
     for (g, b) in static_parts {
         put_count(&mut out, g.len());
         let weight = gop.static_weight.map(|w| &w[start..start + g.len()]);
-        let local = encode_set(&mut out, g, b, zstd_level, weight, octree, coarsen, compact);
+        let local = encode_set(
+            &mut out,
+            g,
+            b,
+            zstd_level,
+            weight,
+            octree,
+            coarsen,
+            compact,
+            gop.mixed_contexts,
+        );
         order.extend(local.into_iter().map(|i| i + start as u32));
         start += g.len();
     }
@@ -1043,6 +1061,7 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
             false,
             None,
             compact,
+            gop.mixed_contexts,
         );
     }
     Ok((out, order))

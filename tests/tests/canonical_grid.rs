@@ -354,7 +354,7 @@ fn the_adaptive_codec_shrinks_real_scenes_and_decodes_exactly() {
             let prev2 = j
                 .checked_sub(2)
                 .map(|p| (q.channels[p].3.as_slice(), q.channels[p].0));
-            let (codec, data) = grid_coder::encode_best(cells, prev, prev2, w, *b, 3);
+            let (codec, data) = grid_coder::encode_best(cells, prev, prev2, w, *b, 3, true);
             tabled += grid_coder::encode_best_tabled(cells, prev, w, *b, 3)
                 .1
                 .len();
@@ -382,6 +382,51 @@ fn the_adaptive_codec_shrinks_real_scenes_and_decodes_exactly() {
             "{scene}: {best} vs {tabled}"
         );
     }
+}
+
+#[test]
+fn without_mixing_no_channel_takes_modes_5_or_6_and_every_cell_decodes_the_same() {
+    // `dlgs encode --fast-decode`: codec 5's mixed modes (first data byte 5 or 6) are left out
+    // of the choice. On the real donut at `high` some channels take them by default, so the
+    // channels without them cost more bytes in all, and still decode to the same cells.
+    let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
+    let g = permute(&g, &grid_order(&g, SortSpec::NONE));
+    let q = quantise_set(&g, &QuantBits::HIGH);
+    let w = sorted_grid::grid_width(g.len());
+    let mixed = |codec: GridCodec, data: &[u8]| {
+        codec == GridCodec::Adaptive && matches!(data.first(), Some(5 | 6))
+    };
+    let (mut bytes, mut mixed_channels) = ([0usize; 2], [0usize; 2]);
+    for j in 0..q.channels.len() {
+        let (b, _, _, cells) = &q.channels[j];
+        let earlier = |back: usize| {
+            j.checked_sub(back)
+                .map(|p| (q.channels[p].3.as_slice(), q.channels[p].0))
+        };
+        for (k, mixing) in [true, false].into_iter().enumerate() {
+            let (codec, data) =
+                grid_coder::encode_best(cells, earlier(1), earlier(2), w, *b, 3, mixing);
+            bytes[k] += data.len();
+            mixed_channels[k] += mixed(codec, &data) as usize;
+            let mut d = grid_coder::decode(
+                codec,
+                ByteReader::new(&data, 0),
+                cells.len(),
+                w,
+                *b,
+                earlier(1),
+                earlier(2),
+            )
+            .unwrap();
+            if codec == GridCodec::HistogramDelta {
+                grid_coder::undo_delta(&mut d, earlier(1).unwrap().0, *b);
+            }
+            assert_eq!(&d, cells, "channel {j}, mixing {mixing}");
+        }
+    }
+    println!("donut high: {bytes:?} B, {mixed_channels:?} mixed channels (with, without)");
+    assert!(mixed_channels[0] > 0 && mixed_channels[1] == 0);
+    assert!(bytes[1] > bytes[0], "{bytes:?}");
 }
 
 /// A still scene through the encoder with the given orientation setting: bytes and decoded
@@ -918,6 +963,7 @@ fn octree_lod3_framed(coarsening: Option<RotationCoarsening>, compact: bool) -> 
         dynamic_bits: &QuantBits::HIGH,
         rotation_coarsening: coarsening,
         compact_records: compact,
+        mixed_contexts: true,
     };
     let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
     let c = Canonical {
@@ -1273,6 +1319,7 @@ fn degenerate_gaussians_decode_finite_in_coarse_rotation_sets() {
         dynamic_bits: &QuantBits::LOW,
         rotation_coarsening: Some(RotationCoarsening::DEFAULT),
         compact_records: true,
+        mixed_contexts: true,
     };
     let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
     assert_eq!(p[0], 4, "layout 4: layout 3 in compact records");
