@@ -159,19 +159,15 @@ pub fn compare_views_psnr(g: &Gaussians, file: &[u8]) -> Result<f64> {
     let cams = orbit_cameras(g, &OrbitSpec::default());
     let reference = bit_allocation::render_views(g, &cams)?;
     let decoded = bit_allocation::render_views(&decode_still(file)?, &cams)?;
-    let sum: f64 = reference
-        .iter()
-        .zip(&decoded)
-        .map(|(a, b)| metrics::psnr(a, b))
-        .sum();
-    Ok(sum / cams.len().max(1) as f64)
+    Ok(mean_psnr(&reference, &decoded, f64::INFINITY))
 }
 
-fn mean_psnr(reference: &[Vec<f32>], decoded: &[Vec<f32>]) -> f64 {
+/// Mean of each view's PSNR, each at most `cap` ([`PSNR_CAP`] in the search).
+fn mean_psnr(reference: &[Vec<f32>], decoded: &[Vec<f32>], cap: f64) -> f64 {
     let sum: f64 = reference
         .iter()
         .zip(decoded)
-        .map(|(a, b)| metrics::psnr(a, b).min(PSNR_CAP))
+        .map(|(a, b)| metrics::psnr(a, b).min(cap))
         .sum();
     sum / reference.len().max(1) as f64
 }
@@ -362,6 +358,7 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             psnr: mean_psnr(
                 &self.reference,
                 &bit_allocation::render_views(&decoded, &self.cams)?,
+                PSNR_CAP,
             ),
         };
         (self.progress)(&trial);
@@ -583,6 +580,7 @@ mod tests {
         let again = mean_psnr(
             &bit_allocation::render_views(&g, &cams).unwrap(),
             &bit_allocation::render_views(&decode_still(&file).unwrap(), &cams).unwrap(),
+            PSNR_CAP,
         );
         assert_eq!(again, best.psnr);
         // Every tier set was tried, each from the coarsest preset.
