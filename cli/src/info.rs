@@ -6,7 +6,8 @@ use std::io::BufReader;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use dlgs::container::{FileReader, NO_REFERENCE};
+use dlgs::container::{ChunkType, FileReader, NO_REFERENCE};
+use dlgs::payload::sorted_grid::{self, CsogSummary};
 use dlgs::Limits;
 use serde::Serialize;
 
@@ -39,6 +40,16 @@ struct Info {
     /// How GOP 0 codes its time features (`TFEA` codec, §6.2), when the scene has dynamics.
     time_features: Option<String>,
     gops: Vec<GopRow>,
+    /// With `--channels`: each `CSOG` chunk's records (§6.5), GOP by GOP.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    csog: Vec<CsogRow>,
+}
+
+#[derive(Serialize)]
+struct CsogRow {
+    gop: u32,
+    #[serde(flatten)]
+    summary: CsogSummary,
 }
 
 /// `TFEA` codec byte (§6.2) in words.
@@ -52,7 +63,7 @@ fn tfea_codec_name(codec: u8) -> String {
     }
 }
 
-fn collect(path: &Path) -> Result<Info> {
+fn collect(path: &Path, channels: bool) -> Result<Info> {
     let f = File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let mut r = FileReader::open_with_limits(BufReader::new(f), Limits::default())
         .with_context(|| format!("reading {}", path.display()))?;
@@ -72,6 +83,7 @@ fn collect(path: &Path) -> Result<Info> {
     }
     let mut time_features = None;
     let mut gops = Vec::new();
+    let mut csog = Vec::new();
     for e in r.index().entries.clone() {
         if time_features.is_none() {
             if let Some(c) = r
@@ -87,6 +99,15 @@ fn collect(path: &Path) -> Result<Info> {
         for c in r.gop_chunks(e.gop)? {
             *chunks.entry(c.ty.to_string()).or_insert(0) += c.len;
             *by_type.entry(c.ty.to_string()).or_insert(0) += c.len;
+            if channels && c.ty == ChunkType::CSOG {
+                let p = r.payload(&c)?;
+                let summary = sorted_grid::describe(&p, c.payload_offset(), &scene)
+                    .with_context(|| format!("reading the CSOG chunk of GOP {}", e.gop))?;
+                csog.push(CsogRow {
+                    gop: e.gop,
+                    summary,
+                });
+            }
         }
         gops.push(GopRow {
             gop: e.gop,
@@ -113,11 +134,12 @@ fn collect(path: &Path) -> Result<Info> {
         meta,
         time_features,
         gops,
+        csog,
     })
 }
 
-pub fn run_info(path: &Path, json: bool) -> Result<()> {
-    let info = collect(path)?;
+pub fn run_info(path: &Path, json: bool, channels: bool) -> Result<()> {
+    let info = collect(path, channels)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&info)?);
         return Ok(());
@@ -176,7 +198,71 @@ pub fn run_info(path: &Path, json: bool) -> Result<()> {
             chunks.join(" ")
         );
     }
+    for c in &info.csog {
+        print_csog(c);
+    }
     Ok(())
+}
+
+/// A `CSOG` chunk's records, then their bytes by attribute (bits per Gaussian over the set's
+/// Gaussians, share of the payload).
+fn print_csog(c: &CsogRow) {
+    let s = &c.summary;
+    println!(
+        "  CSOG of GOP {} (layout {}, {} bytes):",
+        c.gop, s.layout, s.payload_bytes
+    );
+    println!(
+        "    {:<8} {:>4} {:>9}  {:<17} {:>4}  {:>10} {:>7}  coding",
+        "set", "part", "Gaussians", "channel", "bits", "bytes", "bits/G"
+    );
+    let per_g = |bytes: usize, n: usize| 8.0 * bytes as f64 / n.max(1) as f64;
+    for r in &s.records {
+        println!(
+            "    {:<8} {:>4} {:>9}  {:<17} {:>4}  {:>10} {:>7.2}  {}",
+            r.set,
+            r.part,
+            r.gaussians,
+            r.channel,
+            r.bits,
+            r.bytes,
+            per_g(r.bytes, r.gaussians),
+            r.coding
+        );
+    }
+    // By set and attribute, in record order.
+    let mut groups: Vec<((&str, &str), usize)> = Vec::new();
+    for r in &s.records {
+        match groups.iter_mut().find(|g| g.0 == (r.set, r.attribute)) {
+            Some(g) => g.1 += r.bytes,
+            None => groups.push(((r.set, r.attribute), r.bytes)),
+        }
+    }
+    let set_len = |set: &str| -> usize {
+        let mut parts: Vec<(usize, usize)> = s
+            .records
+            .iter()
+            .filter(|r| r.set == set)
+            .map(|r| (r.part, r.gaussians))
+            .collect();
+        parts.dedup();
+        parts.iter().map(|p| p.1).sum()
+    };
+    let share = |b: usize| 100.0 * b as f64 / s.payload_bytes.max(1) as f64;
+    println!("    by attribute:");
+    for ((set, attribute), bytes) in &groups {
+        println!(
+            "      {set:<8} {attribute:<10} {bytes:>10} B  {:>7.2} bits/G  {:>5.1} %",
+            per_g(*bytes, set_len(set)),
+            share(*bytes)
+        );
+    }
+    let coded: usize = groups.iter().map(|g| g.1).sum();
+    let rest = s.payload_bytes - coded.min(s.payload_bytes);
+    println!(
+        "      record heads, ranges and counts {rest:>6} B  {:>5.1} %",
+        share(rest)
+    );
 }
 
 pub fn run_verify(path: &Path) -> Result<()> {

@@ -40,6 +40,10 @@ enum Cmd {
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
+        /// Also list each `CSOG` chunk's channel records: bits, codec and bytes per channel
+        /// and per attribute (where the bytes of the canonical Gaussians go).
+        #[arg(long)]
+        channels: bool,
     },
     /// Read every chunk of a .dlgs file and check every CRC and index entry.
     Verify { file: PathBuf },
@@ -208,7 +212,11 @@ fn main() -> Result<()> {
     quiet_on_broken_pipe();
     let cli = Cli::parse();
     match cli.cmd {
-        Cmd::Info { file, json } => info::run_info(&file, json),
+        Cmd::Info {
+            file,
+            json,
+            channels,
+        } => info::run_info(&file, json, channels),
         Cmd::Verify { file } => info::run_verify(&file),
         Cmd::Encode {
             input,

@@ -343,9 +343,61 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
             size(&fast)
         );
         assert!(ply(&mixed) == ply(&fast), "{extra:?}");
+        // `dlgs info --channels` shows it: no channel of the fast file takes mode 5 or 6.
+        let codings = |f: &str| -> Vec<String> {
+            let info = channel_info(f);
+            let records = info["csog"][0]["records"].as_array().unwrap().clone();
+            records
+                .iter()
+                .map(|r| r["coding"].as_str().unwrap().to_owned())
+                .collect()
+        };
+        let mixed_modes = |c: &[String]| {
+            c.iter()
+                .filter(|c| c.contains("(mode 5)") || c.contains("(mode 6)"))
+                .count()
+        };
+        let (cm, cf) = (codings(&mixed), codings(&fast));
+        assert!(mixed_modes(&cm) > 0, "{extra:?}: {cm:?}");
+        assert_eq!(mixed_modes(&cf), 0, "{extra:?}: {cf:?}");
+        let octree = cm.iter().filter(|c| *c == "octree").count();
+        assert_eq!(octree > 0, extra.is_empty(), "{extra:?}: {cm:?}");
     }
     let err = dlgs_fails(&["encode", scene, "-o", &path("x.dlgs"), "--fast-decode"]);
     assert!(err.contains("lossy --quality"), "{err}");
+}
+
+/// `dlgs info FILE --channels --json`, checked against the file: one `CSOG` chunk whose
+/// parts hold every static Gaussian and whose records' bytes, with the record heads, make up
+/// the chunk's payload.
+fn channel_info(f: &str) -> serde_json::Value {
+    let info: serde_json::Value =
+        serde_json::from_str(&dlgs(&["info", f, "--channels", "--json"])).unwrap();
+    let csog = info["csog"].as_array().unwrap();
+    assert_eq!(csog.len(), 1, "{info}");
+    let payload = csog[0]["payload_bytes"].as_u64().unwrap();
+    assert_eq!(Some(payload), info["chunk_bytes_by_type"]["CSOG"].as_u64());
+    let records = csog[0]["records"].as_array().unwrap();
+    let coded: u64 = records.iter().map(|r| r["bytes"].as_u64().unwrap()).sum();
+    // Heads, ranges and counts: a few bytes per record (14 in layout 1's full records).
+    assert!(
+        coded < payload && payload - coded < 16 * records.len() as u64,
+        "{coded} of {payload}"
+    );
+    let mut parts: Vec<(u64, u64)> = records
+        .iter()
+        .filter(|r| r["set"] == "static")
+        .map(|r| {
+            (
+                r["part"].as_u64().unwrap(),
+                r["gaussians"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    parts.dedup();
+    let n: u64 = parts.iter().map(|p| p.1).sum();
+    assert_eq!(Some(n), info["header"]["n_static"].as_u64(), "{parts:?}");
+    info
 }
 
 #[test]

@@ -523,25 +523,13 @@ impl<W: Write> StreamEncoder<W> {
                     let identity = || (0..statics.len() as u32).collect();
                     Ok(if octree {
                         sorted_grid::encode_octree(&gop, zstd_level)?
-                    } else if parts.len() > 1 || !mixed_contexts {
-                        // Layout 0 (`encode_shaped`) always lets channels mix; layout 1,
-                        // here with one part, follows `mixed_contexts`.
+                    } else {
+                        // Layout 1 even for one part: since 1.12 it stores an empty dynamic set
+                        // as no parts, where layout 0 writes every channel's record for it.
                         (
                             sorted_grid::encode_grid_parts(&gop, zstd_level)?,
                             identity(),
                         )
-                    } else {
-                        let one = Canonical {
-                            statics: parts[0].0.clone(),
-                            dynamics: sorted.dynamics.clone(),
-                        };
-                        let payload = sorted_grid::encode_shaped(
-                            &one,
-                            &bits,
-                            zstd_level,
-                            weights.as_deref(),
-                        )?;
-                        (payload, identity())
                     })
                 };
                 let (mut payload, mut stored) = code(&parts)?;

@@ -2,7 +2,9 @@
 //! coarse rotations, compact records, every grid codec and codec-5 mode), against a scene
 //! header made from the first four bytes: SH degree and language (byte 0), static count (bytes
 //! 1-2, little-endian), dynamic count (byte 3). The container targets reach this parser only
-//! through whole files; here every mutation lands in the payload.
+//! through whole files; here every mutation lands in the payload. `describe` (`dlgs info
+//! --channels`) walks the same records without decoding them and must agree on whether they
+//! are well formed up to the cells.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
@@ -16,5 +18,9 @@ fuzz_target!(|data: &[u8]| {
         s.lang_levels = 3;
         s.lang_dims = 3;
     }
-    let _ = dlgs::payload::sorted_grid::decode(body, 0, &s, &dlgs::Limits::tiny());
+    let decoded = dlgs::payload::sorted_grid::decode(body, 0, &s, &dlgs::Limits::tiny());
+    let described = dlgs::payload::sorted_grid::describe(body, 0, &s);
+    // Whatever decodes is also described (the converse need not hold: describe never decodes
+    // cells, and decode may refuse an allocation under the tiny limits).
+    assert!(decoded.is_err() || described.is_ok());
 });

@@ -262,6 +262,22 @@ impl Mode {
         !matches!(self, Mode::Residual | Mode::Tree | Mode::Mixed(0))
     }
 
+    /// The mode in words, with its number (§6.5.3).
+    pub fn describe(self) -> String {
+        match self {
+            Mode::Residual => "residual (mode 0)".into(),
+            Mode::ResidualGivenPrevious => "residual, previous residual class (mode 1)".into(),
+            Mode::ResidualMinusPrevious => "residual minus previous residual (mode 2)".into(),
+            Mode::TreeGivenPrevious(k) => format!("value tree, previous top {k} bits (mode 3)"),
+            Mode::Tree => "value tree (mode 4)".into(),
+            Mode::Mixed(0) => "mixed: order 0, neighbours (mode 5)".into(),
+            Mode::Mixed(k) => format!("mixed: order 0, neighbours, previous top {k} bits (mode 5)"),
+            Mode::MixedTwo(k, k2) => format!(
+                "mixed: order 0, neighbours, previous top {k} bits, with the one before's top {k2} (mode 6)"
+            ),
+        }
+    }
+
     /// The mode named by a codec-5 channel's first two bytes.
     pub fn from_bytes(mode: u8, k: u8) -> Option<Mode> {
         match (mode, k) {

@@ -1088,17 +1088,49 @@ enum SetForm {
     OctreeCoarse,
 }
 
-fn decode_set(
-    r: &mut ByteReader,
+/// One channel record of a set as read (§6.5.2), its data not yet decoded.
+struct Record<'a> {
+    kind: Kind,
+    bits: u8,
+    codec: GridCodec,
+    min: f32,
+    max: f32,
+    /// The data as the codecs read it (layout 4's word count put back, §6.5.7).
+    data: Cow<'a, [u8]>,
+    /// Absolute offset of the data.
+    at: u64,
+    /// Bytes the data takes in the payload.
+    stored_len: usize,
+}
+
+impl Record<'_> {
+    /// Codec 5's mode, from the data's first two bytes.
+    fn mode(&self) -> Option<super::adaptive_coder::Mode> {
+        (self.codec == GridCodec::Adaptive)
+            .then(|| self.data.get(..2))
+            .flatten()
+            .and_then(|b| super::adaptive_coder::Mode::from_bytes(b[0], b[1]))
+    }
+}
+
+/// A set's records as read: an octree set's positions, its rotation coarsening and one record
+/// per channel (the position channels of an octree set with empty data, codec 0).
+struct SetRecords<'a> {
+    tree: Option<OctreeRecord<'a>>,
+    coarsening: Option<(u8, f32)>,
+    records: Vec<Record<'a>>,
+    /// Index of the first record stored as a channel record (after octree positions).
+    first: usize,
+}
+
+/// Read a set's records (§6.5.2, §6.5.5-6.5.7) without decoding them.
+fn read_set<'a>(
+    r: &mut ByteReader<'a>,
     n: usize,
-    sh_degree: u8,
-    lang_width: usize,
-    limits: &Limits,
+    kinds: &[Kind],
     form: SetForm,
     compact: bool,
-) -> Result<Gaussians> {
-    let mut g = Gaussians::new(sh_degree, lang_width);
-    let kinds = channels(&g);
+) -> Result<SetRecords<'a>> {
     let at = r.offset();
     let w = grid_width(n);
     // Layout 4 leaves out the width and channel count: both follow from the scene (§6.5.7).
@@ -1119,26 +1151,21 @@ fn decode_set(
             ));
         }
     }
-    limits.check_alloc(
-        "CSOG channel cells",
-        (n as u64) * 2 * kinds.len() as u64,
-        at,
-    )?;
     // An octree set's positions come first, already in grid order (§6.5.5).
-    type Stored<'a> = (Kind, u8, GridCodec, f32, f32, Cow<'a, [u8]>, u64);
-    let mut stored: Vec<Stored> = Vec::with_capacity(kinds.len());
+    let mut records: Vec<Record> = Vec::with_capacity(kinds.len());
     let tree = if form != SetForm::Grid {
         let t = read_octree_record(r, compact)?;
         for (a, &(min, max)) in t.ranges.iter().enumerate() {
-            stored.push((
-                kinds[a],
-                t.bits,
-                GridCodec::Constant,
+            records.push(Record {
+                kind: kinds[a],
+                bits: t.bits,
+                codec: GridCodec::Constant,
                 min,
                 max,
-                Cow::Borrowed(&[]),
-                0,
-            ));
+                data: Cow::Borrowed(&[]),
+                at: 0,
+                stored_len: 0,
+            });
         }
         Some(t)
     } else {
@@ -1157,7 +1184,7 @@ fn decode_set(
     } else {
         None
     };
-    let first = stored.len();
+    let first = records.len();
     for &k in &kinds[first..] {
         let at = r.offset();
         let is_index = k == Kind::RotIndex;
@@ -1176,7 +1203,10 @@ fn decode_set(
         let codec = GridCodec::from_u8(codec)
             .ok_or_else(|| bad_at(format!("unknown grid codec {codec}"), at))?;
         // The records after octree positions start without a previous channel.
-        let prev_bits = stored.last().filter(|_| stored.len() > first).map(|p| p.1);
+        let prev_bits = records
+            .last()
+            .filter(|_| records.len() > first)
+            .map(|p| p.bits);
         if codec == GridCodec::HistogramDelta && prev_bits != Some(bits) {
             return Err(bad_at(
                 format!("{k:?}: codec 4 needs a previous channel with the same {bits} bits"),
@@ -1205,28 +1235,63 @@ fn decode_set(
             false => r.u32("CSOG channel length")?,
         } as usize;
         let at = r.offset();
-        let data = r.take(len, "CSOG channel data")?;
+        let stored = r.take(len, "CSOG channel data")?;
         let data = match (compact, codec) {
-            (true, GridCodec::Adaptive) => with_word_count(data, 2, at)?,
-            _ => Cow::Borrowed(data),
+            (true, GridCodec::Adaptive) => with_word_count(stored, 2, at)?,
+            _ => Cow::Borrowed(stored),
         };
-        stored.push((k, bits, codec, min, max, data, at));
+        records.push(Record {
+            kind: k,
+            bits,
+            codec,
+            min,
+            max,
+            data,
+            at,
+            stored_len: len,
+        });
     }
+    Ok(SetRecords {
+        tree,
+        coarsening,
+        records,
+        first,
+    })
+}
+
+fn decode_set(
+    r: &mut ByteReader,
+    n: usize,
+    sh_degree: u8,
+    lang_width: usize,
+    limits: &Limits,
+    form: SetForm,
+    compact: bool,
+) -> Result<Gaussians> {
+    let mut g = Gaussians::new(sh_degree, lang_width);
+    let kinds = channels(&g);
+    let w = grid_width(n);
+    limits.check_alloc(
+        "CSOG channel cells",
+        (n as u64) * 2 * kinds.len() as u64,
+        r.offset(),
+    )?;
+    let SetRecords {
+        tree,
+        coarsening,
+        records: stored,
+        first,
+    } = read_set(r, n, &kinds, form, compact)?;
     // Codec 4 and codec 5 modes 1-3 need the previous channel's final cells:
     // split the records into chains that start at an independent channel, decode the chains in
     // parallel and each chain in order (same cells whatever the thread count). The first
     // record after octree positions starts a chain: it has no previous channel (§6.5.2).
-    let mode = |s: &Stored| {
-        s.5.get(..2)
-            .and_then(|b| super::adaptive_coder::Mode::from_bytes(b[0], b[1]))
-    };
-    let needs_previous = |s: &Stored| match s.2 {
+    let needs_previous = |s: &Record| match s.codec {
         GridCodec::HistogramDelta => true,
-        GridCodec::Adaptive => mode(s).is_none_or(|m| m.needs_previous()),
+        GridCodec::Adaptive => s.mode().is_none_or(|m| m.needs_previous()),
         _ => false,
     };
-    let needs_two =
-        |s: &Stored| s.2 == GridCodec::Adaptive && mode(s).is_some_and(|m| m.needs_two_previous());
+    let needs_two = |s: &Record| s.mode().is_some_and(|m| m.needs_two_previous());
     let mut chains: Vec<std::ops::Range<usize>> = Vec::new();
     for j in first..stored.len() {
         match chains.last_mut() {
@@ -1245,12 +1310,18 @@ fn decode_set(
     let decode_chain = |range: &std::ops::Range<usize>| {
         let mut out: Vec<Vec<u16>> = Vec::with_capacity(range.len());
         for j in range.clone() {
-            let (_, bits, codec, _, _, ref data, at) = stored[j];
-            let prev = out.last().map(|p| (p.as_slice(), stored[j - 1].1));
+            let Record {
+                bits,
+                codec,
+                ref data,
+                at,
+                ..
+            } = stored[j];
+            let prev = out.last().map(|p| (p.as_slice(), stored[j - 1].bits));
             let prev2 = out
                 .len()
                 .checked_sub(2)
-                .map(|p| (out[p].as_slice(), stored[j - 2].1));
+                .map(|p| (out[p].as_slice(), stored[j - 2].bits));
             let r = ByteReader::new(data, at);
             let mut q = grid_coder::decode(codec, r, n, w.max(1), bits, prev, prev2)?;
             if codec == GridCodec::HistogramDelta {
@@ -1264,8 +1335,12 @@ fn decode_set(
     // Octree positions decode beside the chains (no record codes against them). The costliest
     // work starts first, so that no long chain is left to run alone at the end: the octree and
     // its layout, then the chains by their coded bytes.
-    let chain_bytes =
-        |c: &std::ops::Range<usize>| stored[c.clone()].iter().map(|s| s.5.len()).sum::<usize>();
+    let chain_bytes = |c: &std::ops::Range<usize>| {
+        stored[c.clone()]
+            .iter()
+            .map(|s| s.data.len())
+            .sum::<usize>()
+    };
     let mut tasks: Vec<Option<usize>> = (0..chains.len()).map(Some).collect();
     tasks.sort_by_key(|t| std::cmp::Reverse(t.map(|c| chain_bytes(&chains[c]))));
     if tree.is_some() {
@@ -1298,12 +1373,15 @@ fn decode_set(
     let mut decoded: Vec<(u8, Vec<f32>)> = stored
         .par_iter()
         .zip(cells)
-        .map(|(&(k, bits, _, min, max, ..), q)| {
-            let v = match k {
+        .map(|(s, q)| {
+            let v = match s.kind {
                 Kind::RotIndex => q.iter().map(|&v| v as f32).collect(),
-                _ => q.iter().map(|&v| dequantise(v, min, max, bits)).collect(),
+                _ => q
+                    .iter()
+                    .map(|&v| dequantise(v, s.min, s.max, s.bits))
+                    .collect(),
             };
-            (bits, v)
+            (s.bits, v)
         })
         .collect();
     // Layout 3: shifts from the decoded log-scales; rotation cells back to grid order.
@@ -1383,6 +1461,8 @@ struct OctreeRecord<'a> {
     ranges: [(f32, f32); 3],
     data: Cow<'a, [u8]>,
     at: u64,
+    /// Bytes the data takes in the payload.
+    stored_len: usize,
 }
 
 /// A channel range: two f32, or in layout 4 when flagged two binary16 values (§6.5.7).
@@ -1447,6 +1527,7 @@ fn read_octree_record<'a>(r: &mut ByteReader<'a>, compact: bool) -> Result<Octre
         ranges,
         data,
         at,
+        stored_len: len,
     })
 }
 
@@ -1463,15 +1544,13 @@ fn octree_cells(t: &OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
 
 /// A set stored as parts (layout 1): a part count, then per part its Gaussian count and its
 /// set record; the counts must add up to `n`. An empty set may have no parts (since 1.12).
-fn decode_parts(
-    r: &mut ByteReader,
+/// `each` reads one part's set record given its Gaussian count.
+fn read_parts<'a, T>(
+    r: &mut ByteReader<'a>,
     n: usize,
-    sh_degree: u8,
-    lang_width: usize,
-    limits: &Limits,
-    form: SetForm,
     compact: bool,
-) -> Result<Gaussians> {
+    mut each: impl FnMut(&mut ByteReader<'a>, usize) -> Result<T>,
+) -> Result<Vec<T>> {
     let at = r.offset();
     let parts = r.u8("CSOG part count")? as usize;
     if parts > MAX_PARTS || (parts == 0 && n > 0) {
@@ -1480,7 +1559,7 @@ fn decode_parts(
             at,
         ));
     }
-    let mut g = Gaussians::new(sh_degree, lang_width);
+    let mut out = Vec::with_capacity(parts);
     let mut left = n;
     for p in 0..parts {
         let at = r.offset();
@@ -1495,9 +1574,7 @@ fn decode_parts(
             ));
         }
         left -= np;
-        g.extend(&decode_set(
-            r, np, sh_degree, lang_width, limits, form, compact,
-        )?);
+        out.push(each(r, np)?);
     }
     if left != 0 {
         return Err(bad_at(
@@ -1505,6 +1582,25 @@ fn decode_parts(
             at,
         ));
     }
+    Ok(out)
+}
+
+fn decode_parts(
+    r: &mut ByteReader,
+    n: usize,
+    sh_degree: u8,
+    lang_width: usize,
+    limits: &Limits,
+    form: SetForm,
+    compact: bool,
+) -> Result<Gaussians> {
+    let mut g = Gaussians::new(sh_degree, lang_width);
+    read_parts(r, n, compact, |r, np| {
+        g.extend(&decode_set(
+            r, np, sh_degree, lang_width, limits, form, compact,
+        )?);
+        Ok(())
+    })?;
     Ok(g)
 }
 
@@ -1521,6 +1617,172 @@ fn logit(alpha: Vec<f32>, bits: u8) -> Vec<f32> {
         .collect()
 }
 
+/// How `CSOG` layout `version` stores its sets: `None` for layout 0 (one set record each, no
+/// parts), else the static parts' form and whether records are compact (§6.5.2, §6.5.7).
+fn layout_of(version: u8, at: u64) -> Result<Option<(SetForm, bool)>> {
+    match version {
+        0 => Ok(None),
+        1 => Ok(Some((SetForm::Grid, false))),
+        2 => Ok(Some((SetForm::Octree, false))),
+        3 => Ok(Some((SetForm::OctreeCoarse, false))),
+        // Layout 4 is layout 3 in compact records (§6.5.7).
+        4 => Ok(Some((SetForm::OctreeCoarse, true))),
+        _ => Err(bad_at(
+            format!("layout version {version} (this reader knows 0 to 4)"),
+            at,
+        )),
+    }
+}
+
+/// One record of a `CSOG` payload: what it holds, how it is coded and how many bytes its data
+/// takes (for `dlgs info --channels`). Record heads, ranges and counts are not in `bytes`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RecordSummary {
+    /// `"static"` or `"dynamic"`.
+    pub set: &'static str,
+    pub part: usize,
+    /// Gaussians in the part.
+    pub gaussians: usize,
+    /// The channel, e.g. `"log_scale y"`, `"sh 1 g"`; octree positions are one record.
+    pub channel: String,
+    /// The channel's attribute as `dlgs encode --bits` names it.
+    pub attribute: &'static str,
+    pub bits: u8,
+    /// Codec and, for codec 5, its mode (§6.5.3), or `"octree"` (§6.5.5).
+    pub coding: String,
+    pub bytes: usize,
+}
+
+/// Where the bytes of a `CSOG` payload go, record by record.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CsogSummary {
+    pub layout: u8,
+    pub payload_bytes: usize,
+    pub records: Vec<RecordSummary>,
+}
+
+impl Kind {
+    fn name(self) -> String {
+        const AXIS: [&str; 3] = ["x", "y", "z"];
+        const RGB: [&str; 3] = ["r", "g", "b"];
+        match self {
+            Kind::Position(a) => format!("position {}", AXIS[a]),
+            Kind::LogScale(a) => format!("log_scale {}", AXIS[a]),
+            Kind::RotIndex => "rotation index".into(),
+            Kind::Rotation(j) => format!("rotation {j}"),
+            Kind::Opacity => "opacity".into(),
+            // `[coef][rgb]` per Gaussian (coefficient 0 is DC).
+            Kind::Sh(j) => format!("sh {} {}", j / 3, RGB[j % 3]),
+            Kind::LangOpacity => "language opacity".into(),
+            Kind::Lang(j) => format!("language {j}"),
+        }
+    }
+
+    /// The `--bits` name of the attribute ([`Kind::bits`]'s field).
+    fn attribute(self) -> &'static str {
+        match self {
+            Kind::Position(_) => "position",
+            Kind::LogScale(_) => "log_scale",
+            Kind::RotIndex | Kind::Rotation(_) => "rotation",
+            Kind::Opacity | Kind::LangOpacity => "opacity",
+            Kind::Sh(j) if j < 3 => "sh_dc",
+            Kind::Sh(j) if j < 12 => "sh_rest",
+            Kind::Sh(_) => "sh_high",
+            Kind::Lang(_) => "lang",
+        }
+    }
+}
+
+fn coding_name(r: &Record) -> String {
+    match r.codec {
+        GridCodec::Constant => "constant (codec 0)".into(),
+        GridCodec::Zstd => "zstd (codec 1)".into(),
+        GridCodec::Predictive => "predictive (codec 2)".into(),
+        GridCodec::Histogram => "histogram (codec 3)".into(),
+        GridCodec::HistogramDelta => "histogram of the difference (codec 4)".into(),
+        GridCodec::Adaptive => match r.mode() {
+            Some(m) => format!("adaptive (codec 5), {}", m.describe()),
+            None => "adaptive (codec 5), unknown mode".into(),
+        },
+    }
+}
+
+/// Read a `CSOG` payload's records without decoding them (no cells are allocated): which
+/// channel each holds, its bits, codec and bytes. Errors as [`decode`] for what it reads.
+pub fn describe(p: &[u8], offset: u64, scene: &SceneHeader) -> Result<CsogSummary> {
+    let mut r = ByteReader::new(p, offset);
+    let at = r.offset();
+    let layout = r.u8("CSOG layout version")?;
+    let kinds = channels(&Gaussians::new(scene.sh_degree, scene.lang_width()));
+    let (ns, nd) = (scene.n_static as usize, scene.n_dynamic as usize);
+    let mut records = Vec::new();
+    let mut summarise = |set: &'static str, part: usize, n: usize, s: SetRecords| {
+        let row = |channel, attribute, bits, coding, bytes| RecordSummary {
+            set,
+            part,
+            gaussians: n,
+            channel,
+            attribute,
+            bits,
+            coding,
+            bytes,
+        };
+        if let Some(t) = &s.tree {
+            let bytes = t.stored_len;
+            records.push(row(
+                "positions".into(),
+                "position",
+                t.bits,
+                "octree".into(),
+                bytes,
+            ));
+        }
+        for rec in &s.records[s.first..] {
+            let (name, attribute) = (rec.kind.name(), rec.kind.attribute());
+            records.push(row(
+                name,
+                attribute,
+                rec.bits,
+                coding_name(rec),
+                rec.stored_len,
+            ));
+        }
+    };
+    match layout_of(layout, at)? {
+        None => {
+            for (set, n) in [("static", ns), ("dynamic", nd)] {
+                summarise(
+                    set,
+                    0,
+                    n,
+                    read_set(&mut r, n, &kinds, SetForm::Grid, false)?,
+                );
+            }
+        }
+        Some((form, compact)) => {
+            for (set, n, form) in [("static", ns, form), ("dynamic", nd, SetForm::Grid)] {
+                let mut part = 0;
+                read_parts(&mut r, n, compact, |r, np| {
+                    summarise(set, part, np, read_set(r, np, &kinds, form, compact)?);
+                    part += 1;
+                    Ok(())
+                })?;
+            }
+        }
+    }
+    if r.remaining() != 0 {
+        return Err(bad_at(
+            format!("{} bytes after the last channel", r.remaining()),
+            r.offset(),
+        ));
+    }
+    Ok(CsogSummary {
+        layout,
+        payload_bytes: p.len(),
+        records,
+    })
+}
+
 /// Decode a `CSOG` payload that starts at absolute `offset`, checking it against the scene.
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<Canonical> {
     let mut r = ByteReader::new(p, offset);
@@ -1528,39 +1790,15 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let version = r.u8("CSOG layout version")?;
     let (sh, lw) = (scene.sh_degree, scene.lang_width());
     let (ns, nd) = (scene.n_static as usize, scene.n_dynamic as usize);
-    let (statics, dynamics) = match version {
-        0 => (
+    let (statics, dynamics) = match layout_of(version, at)? {
+        None => (
             decode_set(&mut r, ns, sh, lw, limits, SetForm::Grid, false)?,
             decode_set(&mut r, nd, sh, lw, limits, SetForm::Grid, false)?,
         ),
-        1..=4 => {
-            // Layout 4 is layout 3 in compact records (§6.5.7).
-            let form = [
-                SetForm::Grid,
-                SetForm::Octree,
-                SetForm::OctreeCoarse,
-                SetForm::OctreeCoarse,
-            ];
-            let compact = version == 4;
-            (
-                decode_parts(
-                    &mut r,
-                    ns,
-                    sh,
-                    lw,
-                    limits,
-                    form[version as usize - 1],
-                    compact,
-                )?,
-                decode_parts(&mut r, nd, sh, lw, limits, SetForm::Grid, compact)?,
-            )
-        }
-        _ => {
-            return Err(bad_at(
-                format!("layout version {version} (this reader knows 0 to 4)"),
-                at,
-            ))
-        }
+        Some((form, compact)) => (
+            decode_parts(&mut r, ns, sh, lw, limits, form, compact)?,
+            decode_parts(&mut r, nd, sh, lw, limits, SetForm::Grid, compact)?,
+        ),
     };
     if r.remaining() != 0 {
         return Err(bad_at(

@@ -84,9 +84,9 @@ pub fn all() -> Vec<Vector> {
     ];
     v.push(Vector {
         name: "lod3-csog-medium",
-        bytes: csog(&lod3, Vec::new(), false, None, false),
+        bytes: csog_layout0(&lod3),
         error: None,
-        about: "the lod3 scene as sorted quantised grids (CSOG layout 0, grid positions, preset medium, default sort)",
+        about: "the lod3 scene as sorted quantised grids (CSOG layout 0, grid positions, preset medium, default sort; written by the library, as `dlgs encode` writes layout 1 since 2026-11-25)",
     });
     v.push(Vector {
         name: "lod3-csog-tiered",
@@ -480,6 +480,21 @@ pub const COARSE_ROTATIONS: dlgs::payload::sorted_grid::RotationCoarsening =
         factor: 16.0,
         max_shift: 4,
     };
+
+/// Layout 0 (§6.5.2): `dlgs encode` no longer writes it (layout 1 stores an empty dynamic set
+/// in one byte), readers must still decode it. The sorted set at `medium`, in a still file.
+fn csog_layout0(g: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs::payload::sorted_grid::{self, QuantBits};
+    use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
+    let sorted = permute(g, &grid_order(g, SortSpec::DEFAULT));
+    let c = Canonical::from_static(sorted);
+    let payload = sorted_grid::encode(&c, &QuantBits::MEDIUM, 9).unwrap();
+    let mut w = Writer::new(Vec::new(), SceneHeader::still(g.len() as u32, g.sh_degree)).unwrap();
+    w.begin_gop().unwrap();
+    w.gop_chunk(ChunkType::CSOG, FLAG_MUST_UNDERSTAND, &payload)
+        .unwrap();
+    w.finish().unwrap()
+}
 
 fn csog(
     g: &dlgs::Gaussians,

@@ -274,12 +274,31 @@ fn damaged_payloads_give_typed_errors() {
         }
     }
     assert_eq!(errors, p.len().div_ceil(97), "every truncation is an error");
+    // `describe` (`dlgs info --channels`) reads the same records: the intact payload's
+    // records hold all but its heads, every truncation is an error there too.
+    let summary = sorted_grid::describe(&p, 0, &scene).unwrap();
+    let coded: usize = summary.records.iter().map(|r| r.bytes).sum();
+    // Two sets (layout 0), each position, log-scale, rotation, opacity and SH channel.
+    let per_set = 11 + c.statics.sh_stride();
+    assert_eq!(summary.records.len(), 2 * per_set);
+    assert!(
+        coded < p.len() && p.len() - coded < 16 * 2 * per_set,
+        "{coded} of {}",
+        p.len()
+    );
+    for cut in (0..p.len()).step_by(97) {
+        assert!(
+            sorted_grid::describe(&p[..cut], 0, &scene).is_err(),
+            "cut at {cut}"
+        );
+    }
     for i in (0..p.len()).step_by(31) {
         let mut b = p.clone();
         b[i] ^= 0xa5;
-        // Errors or finite Gaussians, never a panic.
+        // Errors or finite Gaussians, never a panic; what decodes is also described.
         if let Ok(d) = sorted_grid::decode(&b, 0, &scene, &limits) {
             assert_eq!(d.statics.len(), c.statics.len());
+            assert!(sorted_grid::describe(&b, 0, &scene).is_ok(), "flip at {i}");
         }
     }
 }
@@ -825,10 +844,14 @@ fn parted_sets_decode_the_same_floats_on_any_thread_count() {
 fn parted_sets_with_wrong_counts_give_typed_errors() {
     let (_, c, p) = parted_lod3();
     let scene = scene_of(&c);
+    // `describe` walks the parts as decoding does and reports the same errors.
     let err = |b: &[u8]| {
-        sorted_grid::decode(b, 0, &scene, &Limits::default())
+        let e = sorted_grid::decode(b, 0, &scene, &Limits::default())
             .unwrap_err()
-            .to_string()
+            .to_string();
+        let d = sorted_grid::describe(b, 0, &scene).unwrap_err().to_string();
+        assert_eq!(e, d);
+        e
     };
     // Byte 0 layout, 1 part count, 2..6 the first part's Gaussian count.
     for parts in [0u8, 17] {
@@ -1062,10 +1085,14 @@ fn damaged_octree_sets_give_typed_errors_not_panics() {
     let scene = scene_of(&c);
     // Byte 0 layout, 1 part count, 2..6 the first part's count, 6..10 width, 10..12 channels,
     // 12 position bits, 13..37 ranges, 37..41 octree length.
+    // `describe` walks the parts as decoding does and reports the same errors.
     let err = |b: &[u8]| {
-        sorted_grid::decode(b, 0, &scene, &Limits::default())
+        let e = sorted_grid::decode(b, 0, &scene, &Limits::default())
             .unwrap_err()
-            .to_string()
+            .to_string();
+        let d = sorted_grid::describe(b, 0, &scene).unwrap_err().to_string();
+        assert_eq!(e, d);
+        e
     };
     for bits in [0u8, 17] {
         let mut b = p.clone();
@@ -1278,10 +1305,14 @@ fn normalised(q: [f32; 4]) -> [f32; 4] {
 fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
     let (c, _, p, _) = octree_lod3_with(Some(COARSE));
     let scene = scene_of(&c);
+    // `describe` walks the parts as decoding does and reports the same errors.
     let err = |b: &[u8]| {
-        sorted_grid::decode(b, 0, &scene, &Limits::default())
+        let e = sorted_grid::decode(b, 0, &scene, &Limits::default())
             .unwrap_err()
-            .to_string()
+            .to_string();
+        let d = sorted_grid::describe(b, 0, &scene).unwrap_err().to_string();
+        assert_eq!(e, d);
+        e
     };
     let (_, _, at) = first_coarsening(&p);
     let mut b = p.clone();
