@@ -46,8 +46,8 @@ pub struct CodecArgs {
     #[arg(long)]
     pub keep_orientation: bool,
     /// Store the static Gaussians' positions as grid channels, in the grid sort's order
-    /// (layouts 0 and 1), as files before format 1.10. By default they are an octree and the
-    /// Gaussians are stored in an order every reader derives from the positions (layouts 2-3,
+    /// (layout 1), as files before format 1.10. By default they are an octree and the
+    /// Gaussians are stored in an order every reader derives from the positions (layouts 2-4,
     /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file), for
     /// 16-50 ms more decode time on 273k Gaussians (BENCHMARKS.md "Decode time")
     #[arg(long)]
