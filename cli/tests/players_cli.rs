@@ -362,6 +362,13 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
         assert_eq!(mixed_modes(&cf), 0, "{extra:?}: {cf:?}");
         let octree = cm.iter().filter(|c| *c == "octree").count();
         assert_eq!(octree > 0, extra.is_empty(), "{extra:?}: {cm:?}");
+        // The table a person reads: one row per record, then the bytes by attribute.
+        let text = dlgs(&["info", &mixed, "--channels"]);
+        let rows = text.lines().filter(|l| l.starts_with("    static ")).count();
+        assert_eq!(rows, cm.len(), "{text}");
+        for says in ["bits/G  coding", "by attribute:", "sh_dc", "record heads"] {
+            assert!(text.contains(says), "{says}: {text}");
+        }
     }
     let err = dlgs_fails(&["encode", scene, "-o", &path("x.dlgs"), "--fast-decode"]);
     assert!(err.contains("lossy --quality"), "{err}");
