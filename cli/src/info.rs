@@ -199,14 +199,14 @@ pub fn run_info(path: &Path, json: bool, channels: bool) -> Result<()> {
         );
     }
     for c in &info.csog {
-        print_csog(c);
+        print_csog(c, h);
     }
     Ok(())
 }
 
 /// A `CSOG` chunk's records, then their bytes by attribute (bits per Gaussian over the set's
 /// Gaussians, share of the payload).
-fn print_csog(c: &CsogRow) {
+fn print_csog(c: &CsogRow, header: &dlgs::SceneHeader) {
     let s = &c.summary;
     println!(
         "  CSOG of GOP {} (layout {}, {} bytes):",
@@ -238,15 +238,9 @@ fn print_csog(c: &CsogRow) {
             None => groups.push(((r.set, r.attribute), r.bytes)),
         }
     }
-    let set_len = |set: &str| -> usize {
-        let mut parts: Vec<(usize, usize)> = s
-            .records
-            .iter()
-            .filter(|r| r.set == set)
-            .map(|r| (r.part, r.gaussians))
-            .collect();
-        parts.dedup();
-        parts.iter().map(|p| p.1).sum()
+    let set_len = |set: &str| match set {
+        "static" => header.n_static as usize,
+        _ => header.n_dynamic as usize,
     };
     let share = |b: usize| 100.0 * b as f64 / s.payload_bytes.max(1) as f64;
     println!("    by attribute:");
@@ -258,7 +252,7 @@ fn print_csog(c: &CsogRow) {
         );
     }
     let coded: usize = groups.iter().map(|g| g.1).sum();
-    let rest = s.payload_bytes - coded.min(s.payload_bytes);
+    let rest = s.payload_bytes.saturating_sub(coded);
     println!(
         "      record heads, ranges and counts {rest:>6} B  {:>5.1} %",
         share(rest)
