@@ -364,7 +364,10 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
         assert_eq!(octree > 0, extra.is_empty(), "{extra:?}: {cm:?}");
         // The table a person reads: one row per record, then the bytes by attribute.
         let text = dlgs(&["info", &mixed, "--channels"]);
-        let rows = text.lines().filter(|l| l.starts_with("    static ")).count();
+        let rows = text
+            .lines()
+            .filter(|l| l.starts_with("    static "))
+            .count();
         assert_eq!(rows, cm.len(), "{text}");
         for says in ["bits/G  coding", "by attribute:", "sh_dc", "record heads"] {
             assert!(text.contains(says), "{says}: {text}");
