@@ -48,8 +48,10 @@ pub struct CodecArgs {
     /// Store the static Gaussians' positions as grid channels, in the grid sort's order
     /// (layout 1), as files before format 1.10. By default they are an octree and the
     /// Gaussians are stored in an order every reader derives from the positions (layouts 2-4,
-    /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file), for
-    /// 16-50 ms more decode time on 273k Gaussians (BENCHMARKS.md "Decode time")
+    /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file);
+    /// grid positions decode faster (273k Gaussians at `high`: 161-186 ms instead of 238-253,
+    /// in a 6.5 % larger file that also keeps every rotation at full bits; BENCHMARKS.md
+    /// "Decode time")
     #[arg(long)]
     pub grid_positions: bool,
     /// Octree positions: store the rotation of each Gaussian too small for one rotation step
