@@ -1545,12 +1545,12 @@ fn octree_cells(t: &OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
 /// A set stored as parts (layout 1): a part count, then per part its Gaussian count and its
 /// set record; the counts must add up to `n`. An empty set may have no parts (since 1.12).
 /// `each` reads one part's set record given its Gaussian count.
-fn read_parts<'a, T>(
+fn read_parts<'a>(
     r: &mut ByteReader<'a>,
     n: usize,
     compact: bool,
-    mut each: impl FnMut(&mut ByteReader<'a>, usize) -> Result<T>,
-) -> Result<Vec<T>> {
+    mut each: impl FnMut(&mut ByteReader<'a>, usize) -> Result<()>,
+) -> Result<()> {
     let at = r.offset();
     let parts = r.u8("CSOG part count")? as usize;
     if parts > MAX_PARTS || (parts == 0 && n > 0) {
@@ -1559,7 +1559,6 @@ fn read_parts<'a, T>(
             at,
         ));
     }
-    let mut out = Vec::with_capacity(parts);
     let mut left = n;
     for p in 0..parts {
         let at = r.offset();
@@ -1574,7 +1573,7 @@ fn read_parts<'a, T>(
             ));
         }
         left -= np;
-        out.push(each(r, np)?);
+        each(r, np)?;
     }
     if left != 0 {
         return Err(bad_at(
@@ -1582,7 +1581,7 @@ fn read_parts<'a, T>(
             at,
         ));
     }
-    Ok(out)
+    Ok(())
 }
 
 fn decode_parts(
