@@ -18,12 +18,14 @@
 # and rotation factor 1.25 by hand (BENCHMARKS.md "Where we are").
 # TARGET=1: instead of those options, each scene is coded with `--target-psnr <SOG's PSNR on the
 # benchmark views>`: the encoder's own search, on views of its own (BENCHMARKS.md "Target PSNR").
+# EXTRA="OPTIONS": appended to every row's options (e.g. EXTRA=--fast-decode OUT=target/goal_rows_fast:
+# the same rows in files that decode faster, BENCHMARKS.md "Decode time against SOG and SPZ").
 # Usage: bash scripts/goal_rows.sh  (~5 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${DLGS_DATA:-../shared/data}
-OUT=target/goal_rows
+OUT=${OUT:-target/goal_rows}
 mkdir -p "$OUT"
 cargo build --release -q -p dlgs-cli
 DLGS=target/release/dlgs
@@ -41,6 +43,8 @@ row() { # peers_dir scene_file options...
   sog=$(peer "$peers" "$name" sog); spz=$(peer "$peers" "$name" spz)
   read -r sp ss <<< "$(metric "$src" "$peers/$name.sog.ply")"
   if [ "${TARGET:-0}" = 1 ]; then set -- --no-meta --target-psnr "$sp"; fi
+  # shellcheck disable=SC2086 # EXTRA is a list of options
+  set -- "$@" ${EXTRA:-}
   start=$(date +%s.%N); $DLGS encode "$src" -o "$f" "$@" > /dev/null; end=$(date +%s.%N)
   read -r p s <<< "$(metric "$src" "$f")"
   local b; b=$(stat -c %s "$f")

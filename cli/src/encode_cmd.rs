@@ -80,8 +80,8 @@ pub struct CodecArgs {
     /// Lossy canonical coding: leave out codec 5's mixed-context modes, which code some
     /// channels 1-5 % smaller but decode about 3 times slower per channel. The same quantised
     /// values (so the same PSNR) in files 1.5-3.1 % larger that decode in about half the time
-    /// (273k Gaussians: 119-124 instead of 234-236 ms on 2 cores; BENCHMARKS.md "Mixed
-    /// contexts"). Format unchanged: every reader decodes both.
+    /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores; BENCHMARKS.md
+    /// "Decode time against SOG and SPZ"). Format unchanged: every reader decodes both.
     #[arg(long)]
     pub fast_decode: bool,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where

@@ -17,10 +17,11 @@
 use std::borrow::Borrow;
 use std::num::NonZeroU32;
 
-use constriction::stream::model::{DecoderModel, EncoderModel, EntropyModel};
-use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
-use constriction::stream::{Decode, Encode};
+use constriction::stream::model::{EncoderModel, EntropyModel};
+use constriction::stream::queue::DefaultRangeEncoder;
+use constriction::stream::Encode;
 
+use super::binary_range_decoder::BinaryRangeDecoder;
 use super::bit_mixer::Mixer;
 use super::grid_coder::{bad, class_of, neighbours, predict, read_words, zigzag};
 use crate::bytes::{ByteReader, PutLe};
@@ -63,17 +64,17 @@ impl Adaptive {
     fn update(&mut self, bit: bool) {
         let shift = (self.seen as u32 + 1).min(MAX_SHIFT);
         let p = self.p as u32;
-        let p = if bit {
-            p - (p >> shift)
-        } else {
-            p + ((ONE - p) >> shift)
-        };
+        // Both sides, then a select: the bit is unpredictable, so a branch would often miss.
+        let down = p - (p >> shift);
+        let up = p + ((ONE - p) >> shift);
+        let p = if bit { down } else { up };
         self.p = p.clamp(P_MIN, ONE - P_MIN) as u16;
         self.seen = self.seen.saturating_add(1);
     }
 }
 
-/// A two-symbol model for constriction's range coder: `false` takes `[0, p0)`.
+/// A two-symbol model for constriction's range encoder: `false` takes `[0, p0)`
+/// ([`BinaryRangeDecoder::binary`] reads it back).
 struct Binary {
     p0: u32,
 }
@@ -92,18 +93,6 @@ impl EncoderModel<PRECISION> for Binary {
             Some((self.p0, NonZeroU32::new(ONE - self.p0)?))
         } else {
             Some((0, NonZeroU32::new(self.p0)?))
-        }
-    }
-}
-
-impl DecoderModel<PRECISION> for Binary {
-    fn quantile_function(&self, quantile: u32) -> (bool, u32, NonZeroU32) {
-        // p0 is in [P_MIN, ONE - P_MIN], so both widths are non-zero.
-        let nz = |v| NonZeroU32::new(v).expect("model probabilities are clamped above zero");
-        if quantile < self.p0 {
-            (false, 0, nz(self.p0))
-        } else {
-            (true, self.p0, nz(ONE - self.p0))
         }
     }
 }
@@ -152,14 +141,6 @@ impl EncoderModel<PRECISION> for Uniform {
     }
 }
 
-impl DecoderModel<PRECISION> for Uniform {
-    fn quantile_function(&self, quantile: u32) -> (u32, u32, NonZeroU32) {
-        let shift = PRECISION as u32 - self.k as u32;
-        let v = quantile >> shift;
-        (v, v << shift, NonZeroU32::new(1 << shift).expect("k <= 16"))
-    }
-}
-
 pub(crate) struct Encoder(pub(crate) DefaultRangeEncoder);
 
 impl BitCoder for Encoder {
@@ -183,14 +164,14 @@ impl BitCoder for Encoder {
 }
 
 pub(crate) struct Decoder<'a> {
-    pub(crate) dec: DefaultRangeDecoder,
+    pub(crate) dec: BinaryRangeDecoder,
     pub(crate) r: &'a ByteReader<'a>,
 }
 
 impl BitCoder for Decoder<'_> {
     fn code_p(&mut self, p0: u32, _: bool) -> Result<bool> {
         self.dec
-            .decode_symbol(Binary { p0 })
+            .binary(p0)
             .map_err(|_| bad(self.r, "range coder stream ended early".into()))
     }
 
@@ -200,14 +181,14 @@ impl BitCoder for Decoder<'_> {
         }
         let k = k.min(PRECISION as u8);
         self.dec
-            .decode_symbol(Uniform { k })
+            .uniform(k as u32)
             .map_err(|_| bad(self.r, "range coder stream ended early".into()))
     }
 }
 
 /// The range decoder of a stream that fills the rest of `r`: a word count, the words, and
 /// nothing after them (`what` names the stream in errors).
-pub(crate) fn open_stream(r: &mut ByteReader, what: &str) -> Result<DefaultRangeDecoder> {
+pub(crate) fn open_stream(r: &mut ByteReader, what: &str) -> Result<BinaryRangeDecoder> {
     let words = read_words(r)?;
     if r.remaining() != 0 {
         return Err(bad(
@@ -215,7 +196,7 @@ pub(crate) fn open_stream(r: &mut ByteReader, what: &str) -> Result<DefaultRange
             format!("{} bytes after the {what} stream", r.remaining()),
         ));
     }
-    DefaultRangeDecoder::from_compressed(words).map_err(|_| bad(r, "range coder stream".into()))
+    Ok(BinaryRangeDecoder::new(words))
 }
 
 /// Coding mode of a codec-5 channel.

@@ -91,8 +91,9 @@ impl Layout {
         let axis = self.axis(idx);
         if na > 0 && na < idx.len() {
             // Points are ordered by the coordinate, then by index: a total order, so the split
-            // is the same whatever the selection algorithm.
-            idx.select_nth_unstable_by_key(na, |&(p, i)| (p[axis], i));
+            // is the same whatever the selection algorithm. Both in one integer, which
+            // compares faster than the pair.
+            idx.select_nth_unstable_by_key(na, |&(p, i)| (p[axis] as u64) << 32 | i as u64);
         }
         let (a, b) = idx.split_at_mut(na);
         let (ca, cb) = cell.split_at_mut(na);
