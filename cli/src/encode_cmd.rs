@@ -7,6 +7,7 @@ use clap::Args;
 use dlgs::container::header::{DeformModel, ResidualMode};
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
+use dlgs::payload::grid_coder;
 use dlgs::payload::mlp_weights::WeightType;
 use dlgs::payload::raw_canonical::RawCodec;
 use dlgs::payload::sorted_grid::{QuantBits, RotationCoarsening};
@@ -82,8 +83,15 @@ pub struct CodecArgs {
     /// values (so the same PSNR) in files 1.5-3.1 % larger that decode in about half the time
     /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores; BENCHMARKS.md
     /// "Decode time against SOG and SPZ"). Format unchanged: every reader decodes both.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "mixed_margin")]
     pub fast_decode: bool,
+    /// Lossy canonical coding: a channel takes codec 5's mixed-context modes only where they
+    /// are this many percent smaller than its best other coding. Between the default and
+    /// `--fast-decode`: the plant's goal row is 0.3 % larger with 2 and decodes 27 % faster,
+    /// 1.2 % larger with 5 and 43 % faster; the 273k scene's 0.2 % and 16 %, 1.1 % and 35 %
+    /// (BENCHMARKS.md "Decode time against SOG and SPZ"). Same values, same PSNR.
+    #[arg(long, value_name = "PERCENT", default_value_t = 100.0 * grid_coder::MIXED_MARGIN)]
+    pub mixed_margin: f64,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
     /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
@@ -227,6 +235,23 @@ impl CodecArgs {
         }
     }
 
+    /// Whether `--mixed-margin` was given a value other than its default.
+    fn mixed_margin_given(&self) -> bool {
+        self.mixed_margin != 100.0 * grid_coder::MIXED_MARGIN
+    }
+
+    /// The encoder's margin for codec 5's mixed modes: `None` with `--fast-decode`.
+    fn mixed_margin(&self) -> Result<Option<f64>> {
+        if self.fast_decode {
+            return Ok(None);
+        }
+        let m = self.mixed_margin;
+        if !(0.0..=100.0).contains(&m) {
+            bail!("--mixed-margin {m}: expected a percentage from 0 to 100");
+        }
+        Ok(Some(m / 100.0))
+    }
+
     /// Whether `--tiers` asks for more than one grid.
     fn tiered(&self) -> bool {
         self.tiers.iter().any(|&f| f > 0.0)
@@ -249,6 +274,12 @@ impl CodecArgs {
             ("lossless", None) if self.fast_decode => {
                 bail!(
                     "--fast-decode chooses among the lossy grid codings: give a lossy --quality \
+                     (or --bits, or --target-psnr)"
+                )
+            }
+            ("lossless", None) if self.mixed_margin_given() => {
+                bail!(
+                    "--mixed-margin chooses among the lossy grid codings: give a lossy --quality \
                      (or --bits, or --target-psnr)"
                 )
             }
@@ -395,7 +426,7 @@ impl CodecArgs {
             drop_invisible: !self.keep_invisible,
             trim_zero_sh_bands: !self.keep_sh_degree,
             compact_records: true,
-            mixed_contexts: !self.fast_decode,
+            mixed_margin: self.mixed_margin()?,
             reallocate_bits: self.reallocate_bits,
             shape_tolerance: self.shape,
             tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
@@ -558,9 +589,11 @@ fn encode_to_target(
                     "  the same file from options: {}{}",
                     found.trials[i].options(&found.groups),
                     if codec.fast_decode {
-                        " --fast-decode"
+                        " --fast-decode".to_owned()
+                    } else if codec.mixed_margin_given() {
+                        format!(" --mixed-margin {}", codec.mixed_margin)
                     } else {
-                        ""
+                        String::new()
                     }
                 );
                 let held_out = compare_views_psnr(g, &file)?;

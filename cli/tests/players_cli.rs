@@ -375,6 +375,42 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
     }
     let err = dlgs_fails(&["encode", scene, "-o", &path("x.dlgs"), "--fast-decode"]);
     assert!(err.contains("lossy --quality"), "{err}");
+
+    // `--mixed-margin`: between the two. A 5 % margin lets fewer channels take the mixed
+    // modes than the default 1 %, for a file between the two sizes, with the same Gaussians.
+    let e = ["encode", scene, "--quality", "high", "--no-meta", "-o"];
+    let (one, five, none) = (path("m1.dlgs"), path("m5.dlgs"), path("m0.dlgs"));
+    dlgs(&[&e[..], &[&one]].concat());
+    dlgs(&[&e[..], &[&five, "--mixed-margin", "5"]].concat());
+    dlgs(&[&e[..], &[&none, "--fast-decode"]].concat());
+    let mixed_records = |f: &str| {
+        channel_info(f)["csog"][0]["records"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| {
+                let c = r["coding"].as_str().unwrap();
+                c.contains("(mode 5)") || c.contains("(mode 6)")
+            })
+            .count()
+    };
+    let (m1, m5) = (mixed_records(&one), mixed_records(&five));
+    assert!(m1 > m5, "{m1} vs {m5} mixed records");
+    assert!(
+        size(&one) < size(&five) && size(&five) < size(&none),
+        "{} {} {}",
+        size(&one),
+        size(&five),
+        size(&none)
+    );
+    assert!(ply(&one) == ply(&five));
+    let x = path("x.dlgs");
+    let err = dlgs_fails(&[&e[..], &[&x, "--mixed-margin", "5", "--fast-decode"]].concat());
+    assert!(err.contains("cannot be used with"), "{err}");
+    let err = dlgs_fails(&[&e[..], &[&x, "--mixed-margin", "200"]].concat());
+    assert!(err.contains("from 0 to 100"), "{err}");
+    let err = dlgs_fails(&["encode", scene, "-o", &x, "--mixed-margin", "5"]);
+    assert!(err.contains("lossy --quality"), "{err}");
 }
 
 /// `dlgs info FILE --channels --json`, checked against the file: one `CSOG` chunk whose

@@ -24,7 +24,7 @@ fn bench(c: &mut Criterion) {
     let canon = Canonical::from_static(sorted);
     let payload = sorted_grid::encode(&canon, &QuantBits::HIGH, 9).unwrap();
     let part = [(g.clone(), QuantBits::HIGH)];
-    let octree_payload = |rotation_coarsening, mixed_contexts| {
+    let octree_payload = |rotation_coarsening, mixed_margin| {
         let gop = sorted_grid::PartedGop {
             static_parts: &part,
             static_weight: None,
@@ -32,14 +32,15 @@ fn bench(c: &mut Criterion) {
             dynamic_bits: &QuantBits::HIGH,
             rotation_coarsening,
             compact_records: true,
-            mixed_contexts,
+            mixed_margin,
         };
         sorted_grid::encode_octree(&gop, 9).unwrap().0
     };
-    let octree = octree_payload(None, true);
-    let coarse = octree_payload(Some(RotationCoarsening::DEFAULT), true);
+    let default = Some(dlgs::payload::grid_coder::MIXED_MARGIN);
+    let octree = octree_payload(None, default);
+    let coarse = octree_payload(Some(RotationCoarsening::DEFAULT), default);
     // `dlgs encode --fast-decode`: the default layout without codec 5's mixed modes.
-    let fast = octree_payload(Some(RotationCoarsening::DEFAULT), false);
+    let fast = octree_payload(Some(RotationCoarsening::DEFAULT), None);
     let scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     let field = synth_ntc(
         &canon,

@@ -63,7 +63,8 @@ fn main() {
         let prev2 = j
             .checked_sub(2)
             .map(|p| (set.channels[p].3.as_slice(), set.channels[p].0));
-        let (codec, best) = grid_coder::encode_best(q, prev, prev2, w, *b, 19, true);
+        let (codec, best) =
+            grid_coder::encode_best(q, prev, prev2, w, *b, 19, Some(grid_coder::MIXED_MARGIN));
         let (_, tabled) = grid_coder::encode_best_tabled(q, prev, w, *b, 19);
         let sizes = serde_json::json!({
             "name": names.get(j).cloned().unwrap_or_else(|| format!("ch{j}")),

@@ -124,8 +124,8 @@ impl Judge {
                 rotation_coarsening: self.coarsening,
                 compact_records: true,
                 // Bytes judged as the default coder makes them, also under `--fast-decode`
-                // (which adds a few percent to every candidate alike).
-                mixed_contexts: true,
+                // or `--mixed-margin` (which add a few percent to every candidate alike).
+                mixed_margin: Some(dlgs::payload::grid_coder::MIXED_MARGIN),
             };
             sorted_grid::encode_octree(&gop, self.zstd_level)?.0
         } else {

@@ -202,9 +202,12 @@ pub struct EncoderConfig {
     /// layouts (the conformance vectors).
     pub compact_records: bool,
     /// Lossy (`CSOG`) scenes: let channels take codec 5's mixed-context modes where they code
-    /// smallest (format 1.13). `false` (`dlgs encode --fast-decode`): the same values in files
-    /// 1.5-3.1 % larger that decode in about half the time (BENCHMARKS.md "Mixed contexts").
-    pub mixed_contexts: bool,
+    /// smaller than any other coding by this fraction (format 1.13; default
+    /// [`MIXED_MARGIN`](dlgs::payload::grid_coder::MIXED_MARGIN), `dlgs encode
+    /// --mixed-margin`). `None` (`dlgs encode --fast-decode`): the same values in files 1.5-3.1 %
+    /// larger that decode in about half the time (BENCHMARKS.md "Decode time against SOG and
+    /// SPZ").
+    pub mixed_margin: Option<f64>,
     /// Lossy (`CSOG`) still scenes: fit the stored colours to what the rest decodes to
     /// ([`colour_refit`]), kept only if the encoder's held-out views render closer to the
     /// source. Codes the scene three times (first, then each of the two refits), plus the fit.
@@ -235,7 +238,7 @@ impl Default for EncoderConfig {
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
             compact_records: true,
-            mixed_contexts: true,
+            mixed_margin: Some(dlgs::payload::grid_coder::MIXED_MARGIN),
             refit_colours: false,
         }
     }
@@ -507,7 +510,7 @@ impl<W: Write> StreamEncoder<W> {
                 let zstd_level = self.cfg.zstd_level;
                 let coarsening = self.cfg.rotation_coarsening;
                 let compact_records = self.cfg.compact_records;
-                let mixed_contexts = self.cfg.mixed_contexts;
+                let mixed_margin = self.cfg.mixed_margin;
                 // The payload of `parts`, and per decoded static Gaussian its index in the
                 // parts' concatenation.
                 let code = |parts: &[(dlgs::Gaussians, QuantBits)]| -> Result<(Vec<u8>, Vec<u32>)> {
@@ -518,7 +521,7 @@ impl<W: Write> StreamEncoder<W> {
                         dynamic_bits: &bits,
                         rotation_coarsening: coarsening,
                         compact_records,
-                        mixed_contexts,
+                        mixed_margin,
                     };
                     let identity = || (0..statics.len() as u32).collect();
                     Ok(if octree {

@@ -481,15 +481,17 @@ fn encode_histogram_delta(
 pub const DEPENDENT_MARGIN: f64 = 0.005;
 
 /// Codec 5's mixed modes (5 and 6) must be this much smaller than the channel's best other
-/// coding: they decode about 3 times slower than the value trees.
+/// coding by default: they decode about 3 times slower than the value trees. Larger margins
+/// (`dlgs encode --mixed-margin`) trade a little size for decode time.
 pub const MIXED_MARGIN: f64 = 0.01;
 
 /// Encode with whichever codec is smallest for this channel: codecs 0-4
 /// ([`encode_best_tabled`]) and every usable mode of codec 5, preferring by
 /// [`DEPENDENT_MARGIN`] those that decode without the previous channel (`prev`; `prev2` is
-/// the channel before it, for codec 5 mode 6) and by [`MIXED_MARGIN`] the others. Without
-/// `mixing`, codec 5's mixed modes (5 and 6) are not tried: the file decodes faster for a few
-/// percent more bytes (`dlgs encode --fast-decode`, BENCHMARKS.md "Mixed contexts").
+/// the channel before it, for codec 5 mode 6) and by `mixed_margin` (a fraction, usually
+/// [`MIXED_MARGIN`]) the others. With `mixed_margin` `None`, codec 5's mixed modes (5 and 6)
+/// are not tried: the file decodes faster for a few percent more bytes (`dlgs encode
+/// --fast-decode`, BENCHMARKS.md "Mixed contexts").
 pub fn encode_best(
     q: &[u16],
     prev: Previous,
@@ -497,7 +499,7 @@ pub fn encode_best(
     width: usize,
     bits: u8,
     zstd_level: i32,
-    mixing: bool,
+    mixed_margin: Option<f64>,
 ) -> (GridCodec, Vec<u8>) {
     // Codecs 0-3 never need the previous channel; codec 4 always does.
     let plain = encode_best_tabled(q, None, width, bits, zstd_level);
@@ -509,7 +511,7 @@ pub fn encode_best(
         candidates.push((true, GridCodec::HistogramDelta, d));
     }
     for mode in adaptive_coder::candidate_modes(bits, prev, prev2) {
-        if !mixing && matches!(mode, Mode::Mixed(_) | Mode::MixedTwo(..)) {
+        if mixed_margin.is_none() && matches!(mode, Mode::Mixed(_) | Mode::MixedTwo(..)) {
             continue;
         }
         if let Some(d) = adaptive_coder::encode(q, prev, prev2, width, bits, mode) {
@@ -519,7 +521,12 @@ pub fn encode_best(
     // Modes 5 and 6 are judged by their size plus the margin.
     let judged = |c: &(bool, GridCodec, Vec<u8>)| {
         let mixed = c.1 == GridCodec::Adaptive && matches!(c.2.first(), Some(5 | 6));
-        c.2.len() as f64 * if mixed { 1.0 + MIXED_MARGIN } else { 1.0 }
+        c.2.len() as f64
+            * if mixed {
+                1.0 + mixed_margin.unwrap_or(0.0)
+            } else {
+                1.0
+            }
     };
     let smallest = |dep: bool| {
         candidates

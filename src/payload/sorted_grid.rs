@@ -543,7 +543,7 @@ fn code_set(
     weight: Option<&[f32]>,
     octree: bool,
     coarsen: Option<RotationCoarsening>,
-    mixing: bool,
+    mixed_margin: Option<f64>,
 ) -> CodedSet {
     let w = grid_width(g.len()).max(1);
     let mut chans = quantise_set(g, bits).channels;
@@ -637,7 +637,7 @@ fn code_set(
                     .map(|p| (chans[p].3.as_slice(), chans[p].0))
             };
             let (codec, data) =
-                grid_coder::encode_best(q, earlier(1), earlier(2), w, *b, zstd_level, mixing);
+                grid_coder::encode_best(q, earlier(1), earlier(2), w, *b, zstd_level, mixed_margin);
             Channel {
                 bits: *b,
                 min: *min,
@@ -742,9 +742,9 @@ fn encode_set(
     octree: bool,
     coarsen: Option<RotationCoarsening>,
     compact: bool,
-    mixing: bool,
+    mixed_margin: Option<f64>,
 ) -> Vec<u32> {
-    let coded = code_set(g, bits, zstd_level, weight, octree, coarsen, mixing);
+    let coded = code_set(g, bits, zstd_level, weight, octree, coarsen, mixed_margin);
     if !compact {
         out.put_u32(grid_width(g.len()) as u32);
         out.put_u16(coded.channels.len() as u16);
@@ -832,7 +832,15 @@ pub fn breakdown(
     octree: bool,
 ) -> Vec<(&'static str, usize)> {
     let kinds = channels(g);
-    let coded = code_set(g, bits, zstd_level, None, octree, None, true);
+    let coded = code_set(
+        g,
+        bits,
+        zstd_level,
+        None,
+        octree,
+        None,
+        Some(grid_coder::MIXED_MARGIN),
+    );
     let tree = coded
         .octree
         .as_ref()
@@ -909,7 +917,7 @@ pub fn encode_shaped(
         false,
         None,
         false,
-        true,
+        Some(grid_coder::MIXED_MARGIN),
     );
     encode_set(
         &mut out,
@@ -920,7 +928,7 @@ pub fn encode_shaped(
         false,
         None,
         false,
-        true,
+        Some(grid_coder::MIXED_MARGIN),
     );
     Ok(out)
 }
@@ -944,7 +952,7 @@ pub fn encode_parts(
         dynamic_bits,
         rotation_coarsening: None,
         compact_records: false,
-        mixed_contexts: true,
+        mixed_margin: Some(grid_coder::MIXED_MARGIN),
     };
     encode_grid_parts(&parts, zstd_level)
 }
@@ -970,8 +978,9 @@ pub struct PartedGop<'a> {
     /// layouts 2 and 3's.
     pub compact_records: bool,
     /// Let channels take codec 5's mixed-context modes (5 and 6, since 1.13) where they are
-    /// smallest; `false` leaves them out for faster decoding (`dlgs encode --fast-decode`).
-    pub mixed_contexts: bool,
+    /// smaller than any other coding by this fraction (usually [`grid_coder::MIXED_MARGIN`]);
+    /// `None` leaves them out for faster decoding (`dlgs encode --fast-decode`).
+    pub mixed_margin: Option<f64>,
 }
 
 /// Encode a canonical GOP in layout 2 (§6.5.2, since 1.10): as [`encode_parts`], but each
@@ -1040,7 +1049,7 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
             octree,
             coarsen,
             compact,
-            gop.mixed_contexts,
+            gop.mixed_margin,
         );
         order.extend(local.into_iter().map(|i| i + start as u32));
         start += g.len();
@@ -1061,7 +1070,7 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
             false,
             None,
             compact,
-            gop.mixed_contexts,
+            gop.mixed_margin,
         );
     }
     Ok((out, order))
