@@ -113,7 +113,8 @@ mod tests {
     use constriction::stream::{Decode, Encode};
     use std::num::NonZeroU32;
 
-    /// The reference: `constriction`'s generic decoder with the two models spelled out.
+    /// The reference: `constriction`'s generic coder with the two models spelled out, both
+    /// directions.
     struct Split(u32);
     impl EntropyModel<16> for Split {
         type Symbol = bool;
@@ -150,6 +151,15 @@ mod tests {
             let shift = 16 - self.0;
             let v = q >> shift;
             (v, v << shift, NonZeroU32::new(1 << shift).unwrap())
+        }
+    }
+    impl constriction::stream::model::EncoderModel<16> for Flat {
+        fn left_cumulative_and_probability(
+            &self,
+            s: impl std::borrow::Borrow<u32>,
+        ) -> Option<(u32, NonZeroU32)> {
+            let shift = 16 - self.0;
+            Some((*s.borrow() << shift, NonZeroU32::new(1 << shift)?))
         }
     }
 
@@ -245,7 +255,7 @@ mod tests {
                     }
                     Step::Uniform(k) => {
                         let v = (rng.next() % (1 << k)) as u32;
-                        enc.encode_symbol(v, FlatEnc(k)).unwrap();
+                        enc.encode_symbol(v, Flat(k)).unwrap();
                         plan.push((Step::Uniform(k), v));
                     }
                 }
@@ -258,21 +268,6 @@ mod tests {
                 };
                 assert_eq!(got, Ok(want), "case {case} symbol {i}");
             }
-        }
-    }
-
-    struct FlatEnc(u32);
-    impl EntropyModel<16> for FlatEnc {
-        type Symbol = u32;
-        type Probability = u32;
-    }
-    impl constriction::stream::model::EncoderModel<16> for FlatEnc {
-        fn left_cumulative_and_probability(
-            &self,
-            s: impl std::borrow::Borrow<u32>,
-        ) -> Option<(u32, NonZeroU32)> {
-            let shift = 16 - self.0;
-            Some((*s.borrow() << shift, NonZeroU32::new(1 << shift)?))
         }
     }
 }
