@@ -835,8 +835,8 @@ fn parted_sets_decode_to_their_parts_quantised_and_concatenated() {
 
 #[test]
 fn parted_sets_decode_the_same_floats_on_any_thread_count() {
-    // Each part decodes its channel chains on the thread pool: the joined set must not depend
-    // on the pool size.
+    // Every part's octree and channel chains share one pool of tasks: the joined set must not
+    // depend on the pool size.
     let (_, c, p) = parted_lod3();
     let scene = scene_of(&c);
     let run = |t| {
