@@ -15,6 +15,7 @@ pub mod ntc_residual;
 pub mod octree_positions;
 pub mod raw_canonical;
 pub mod sorted_grid;
+pub mod task_queue;
 pub mod time_features;
 
 use crate::container::{ChunkType, SceneHeader};

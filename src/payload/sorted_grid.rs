@@ -14,7 +14,7 @@ use crate::limits::Limits;
 use crate::model::{sigmoid, Canonical, Gaussians};
 use crate::payload::adaptive_coder::Mode;
 use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::{grid_shaping, half_range, kd_layout, octree_positions};
+use crate::payload::{grid_shaping, half_range, kd_layout, octree_positions, task_queue};
 
 /// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -1370,14 +1370,12 @@ fn decode_sets(plans: &[SetPlan]) -> Result<Vec<Gaussians>> {
         }
     }
     tasks.sort_by_key(|&(_, cost)| std::cmp::Reverse(cost));
-    let done: Vec<(Task, Vec<Vec<u16>>)> = tasks
-        .into_par_iter()
-        .with_max_len(1)
-        .map(|(t, _)| match t {
-            Task::Chain(set, c) => Ok((t, plans[set].decode_chain(c)?)),
-            Task::Octree(set) => Ok((t, plans[set].decode_octree()?)),
-        })
-        .collect::<Result<_>>()?;
+    let done: Vec<(Task, Vec<Vec<u16>>)> = task_queue::in_list_order(&tasks, |&(t, _)| match t {
+        Task::Chain(set, c) => Ok((t, plans[set].decode_chain(c)?)),
+        Task::Octree(set) => Ok((t, plans[set].decode_octree()?)),
+    })
+    .into_iter()
+    .collect::<Result<_>>()?;
     let mut positions: Vec<Vec<Vec<u16>>> = vec![Vec::new(); plans.len()];
     let mut chains: Vec<Vec<Vec<Vec<u16>>>> = plans
         .iter()
