@@ -1897,6 +1897,9 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     }
     let split = static_plans.len();
     let plans: Vec<SetPlan> = static_plans.into_iter().chain(dynamic_plans).collect();
+    // Every part's cells are held at once until the parts are dequantised.
+    let kinds = channels(&Gaussians::new(sh, lw)).len() as u64;
+    limits.check_alloc("CSOG channel cells", ((ns + nd) as u64) * 2 * kinds, at)?;
     let mut sets = decode_sets(&plans)?;
     let dynamics = join_parts(sets.split_off(split), sh, lw);
     Ok(Canonical {

@@ -12,7 +12,7 @@ use dlgs::payload::sorted_grid::{
     self, dequantise, quantise_set, robust_radius, rotation_shift, QuantBits, RotationCoarsening,
     LOG_SCALE_BELOW_RADIUS, LOG_SCALE_SPAN,
 };
-use dlgs::Limits;
+use dlgs::{ErrorKind, Limits};
 use dlgs_decoder::Decoder;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::orientation::closest_to_identity;
@@ -848,6 +848,28 @@ fn parted_sets_decode_the_same_floats_on_any_thread_count() {
     let one = run(1);
     assert_eq!(one, run(2));
     assert_eq!(one, run(5));
+}
+
+#[test]
+fn parted_sets_keep_all_their_cells_within_the_allocation_limit() {
+    // A reader holds every part's cells at once before dequantising them, so the limit applies
+    // to the whole set, not to the largest part.
+    let (_, c, p) = parted_lod3();
+    let scene = scene_of(&c);
+    // lod3 (SH 3, no language): 3 + 3 + 1 + 3 + 1 + 48 channels of 2-byte cells.
+    let cells = c.statics.len() as u64 * 2 * 59;
+    let limits = |max_alloc| Limits {
+        max_alloc,
+        ..Limits::default()
+    };
+    assert!(sorted_grid::decode(&p, 0, &scene, &limits(cells)).is_ok());
+    // Under the whole set's cells but above its largest part's (1,200 of 1,971 Gaussians).
+    let e = sorted_grid::decode(&p, 0, &scene, &limits(cells - 1)).unwrap_err();
+    assert!(
+        matches!(e.kind, ErrorKind::LimitExceeded { .. })
+            && e.to_string().contains("CSOG channel cells"),
+        "{e}"
+    );
 }
 
 #[test]
