@@ -4,6 +4,7 @@ pub mod adaptive_coder;
 pub mod binary_bits;
 pub mod binary_range_decoder;
 pub mod bit_mixer;
+pub mod colour_lattice;
 pub mod delta_residual;
 pub mod grid_coder;
 pub mod grid_shaping;

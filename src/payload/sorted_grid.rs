@@ -14,7 +14,9 @@ use crate::limits::Limits;
 use crate::model::{sigmoid, Canonical, Gaussians};
 use crate::payload::adaptive_coder::Mode;
 use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::{grid_shaping, half_range, kd_layout, octree_positions, task_queue};
+use crate::payload::{
+    colour_lattice, grid_shaping, half_range, kd_layout, octree_positions, task_queue,
+};
 
 /// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -298,6 +300,12 @@ fn range(k: Kind, v: &[f32], radius: Option<f32>, bits: u8) -> (f32, f32) {
             let plain = half_range::snap(lo, hi, bits);
             return cheaper_range(v, plain, zero_on_level(lo, hi, bits), bits);
         }
+        // SH DC from 8-bit colours: levels on the colours, not snapped to binary16 ends
+        // (that would move them off the colours again).
+        Kind::Sh(_) => match colour_lattice::range(v, bits) {
+            Some(r) => return r,
+            None => min_max(),
+        },
         _ => min_max(),
     };
     match k {

@@ -36,6 +36,28 @@ fn round_trip(c: &Canonical, bits: &QuantBits) -> Canonical {
 }
 
 #[test]
+fn eight_bit_colours_decode_to_their_own_values() {
+    // The plant is a `.splat` capture: its SH DC values are 8-bit colours, and the encoder
+    // puts the DC levels on them (`colour_lattice`), so at 8 bits every colour comes back
+    // (to f32 rounding), where the data's min/max range moved them by up to half a step.
+    let g = load("splat/marcelpadilla_plant.splat");
+    let colour = |dc: f32| (dc * dlgs::interop::splat::SH_C0 + 0.5) * 255.0;
+    let d = round_trip(&Canonical::from_static(g.clone()), &QuantBits::HIGH);
+    assert_eq!(d.statics.len(), g.len());
+    let worst = g
+        .sh
+        .iter()
+        .zip(&d.statics.sh)
+        .map(|(&a, &b)| (colour(a) - colour(b)).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "a colour moved by {worst} steps");
+    // A float-valued scene takes the min/max range as before: the donut's DC is not on colours.
+    let donut = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
+    let dc: Vec<f32> = donut.sh.iter().step_by(3).copied().collect();
+    assert_eq!(dlgs::payload::colour_lattice::range(&dc, 8), None);
+}
+
+#[test]
 fn decoding_restores_the_quantised_values_exactly() {
     for (path, lang) in [
         ("ply/supersplat_fruit_drops_minimal_4721_sh3.ply", true),
