@@ -44,12 +44,11 @@ fn eight_bit_colours_decode_to_their_own_values() {
     let colour = |dc: f32| (dc * dlgs::interop::splat::SH_C0 + 0.5) * 255.0;
     let d = round_trip(&Canonical::from_static(g.clone()), &QuantBits::HIGH);
     assert_eq!(d.statics.len(), g.len());
-    let worst = g
-        .sh
-        .iter()
-        .zip(&d.statics.sh)
-        .map(|(&a, &b)| (colour(a) - colour(b)).abs())
-        .fold(0.0f32, f32::max);
+    let worst =
+        g.sh.iter()
+            .zip(&d.statics.sh)
+            .map(|(&a, &b)| (colour(a) - colour(b)).abs())
+            .fold(0.0f32, f32::max);
     assert!(worst < 1e-3, "a colour moved by {worst} steps");
     // A float-valued scene takes the min/max range as before: the donut's DC is not on colours.
     let donut = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
