@@ -5,6 +5,12 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::model::Gaussians;
 
 pub const SH_C0: f32 = 0.282_094_8;
+
+/// The SH DC coefficient of 8-bit colour value `c` (`c` may lie outside 0..=255: an encoder
+/// extends the colour lattice past the data, `payload::colour_lattice`).
+pub fn colour_to_dc(c: f32) -> f32 {
+    (c / 255.0 - 0.5) / SH_C0
+}
 const STRIDE: usize = 32;
 
 fn err(reason: impl Into<String>) -> Error {
@@ -40,7 +46,7 @@ pub fn read_splat(data: &[u8]) -> Result<Gaussians> {
             .push([3, 4, 5].map(|i| f(r, i).abs().max(1e-12).ln()));
         let c = &r[24..28];
         for ch in 0..3 {
-            g.sh.push((c[ch] as f32 / 255.0 - 0.5) / SH_C0);
+            g.sh.push(colour_to_dc(c[ch] as f32));
         }
         g.opacity.push(alpha_u8_to_logit(c[3]));
         let q = &r[28..32];

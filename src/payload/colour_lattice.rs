@@ -5,7 +5,7 @@
 //! than the colours' spread needs) the values keep their colour, for the same number of levels.
 //! The plant's goal row: 0.9 % fewer bytes and +0.16 dB (BENCHMARKS.md "Colour lattice").
 
-use crate::interop::splat::SH_C0;
+use crate::interop::splat::{colour_to_dc as dc, SH_C0};
 
 /// Largest distance, in 8-bit colour steps, of a value from a whole colour for it to count as
 /// one: f32 rounding of `(c / 255 - 0.5) / C0` and back stays under 1e-4 steps.
@@ -14,11 +14,6 @@ const TOLERANCE: f32 = 1e-3;
 /// The colour step `c` of an SH DC value.
 fn colour(dc: f32) -> f32 {
     (dc * SH_C0 + 0.5) * 255.0
-}
-
-/// The SH DC value of colour `c`, computed as `.splat` readers compute it.
-fn dc(c: f32) -> f32 {
-    (c / 255.0 - 0.5) / SH_C0
 }
 
 /// If every value of `v` is a whole 8-bit colour step, the range for `bits`-bit levels that
