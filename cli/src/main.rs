@@ -1,6 +1,7 @@
 //! `dlgs`: encode, inspect, decode and render `.dlgs` streams.
 
 mod cameras_arg;
+mod codec_args;
 mod encode_cmd;
 mod export_cmd;
 mod info;
@@ -12,6 +13,7 @@ mod rd_cmd;
 mod rd_plot;
 mod scene_io;
 mod seek_cmd;
+mod synth_cmd;
 
 use std::path::PathBuf;
 
@@ -94,7 +96,7 @@ enum Cmd {
     /// Build a SYNTHETIC dynamic model from a real scene (no trained DLGStream model is
     /// available here): a compact subset moves, driven by smooth time features and random
     /// calibrated decoders.
-    Synth(encode_cmd::SynthArgs),
+    Synth(synth_cmd::SynthArgs),
     /// Decode the Gaussians shown at time t into an INRIA PLY (with language extras if present).
     Decode {
         file: PathBuf,
@@ -240,7 +242,7 @@ fn main() -> Result<()> {
             gop_cache,
         } => seek_cmd::run_seek(&file, count, seed, gop_cache),
         Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
-        Cmd::Synth(args) => encode_cmd::run_synth(&args),
+        Cmd::Synth(args) => synth_cmd::run_synth(&args),
         Cmd::Decode { file, t, output } => export_cmd::run_decode(&file, t, &output),
         Cmd::Query(a) => query_cmd::run_query(&a),
         Cmd::Labels(a) => query_cmd::run_labels(&a),

@@ -1,0 +1,465 @@
+//! The encoder settings `dlgs encode`, `dlgs synth`, `dlgs ingest` and `dlgs rd` share, and
+//! the [`EncoderConfig`] they make.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use dlgs::container::header::ResidualMode;
+use dlgs::model::lang_decoder::LangDecoder;
+use dlgs::model::residual::{AttrGroup, DeltaTarget};
+use dlgs::payload::grid_coder;
+use dlgs::payload::mlp_weights::WeightType;
+use dlgs::payload::raw_canonical::RawCodec;
+use dlgs::payload::sorted_grid::{QuantBits, RotationCoarsening};
+use dlgs_encoder::{
+    CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, ResidualConfig, SortSpec,
+};
+
+/// Encoder settings shared by `encode`, `synth`, `ingest` and `rd`.
+#[derive(Args, Debug, Clone, serde::Serialize)]
+pub struct CodecArgs {
+    /// Canonical Gaussians: `lossless` (f32, CRAW) or sorted quantised grids (CSOG) at preset
+    /// `near-lossless`, `high`, `medium` or `low` (bits per attribute in format-spec §6.5).
+    /// `near-lossless` also stores the decoders in f16 (as `--mlp-f16`): on the reference-run
+    /// fixture it renders at >= 64 dB against the lossless model (BENCHMARKS.md "Ingest").
+    #[arg(long, default_value = "lossless")]
+    pub quality: String,
+    /// Override quantisation bits, e.g. `position=15,sh_rest=5` (keys: position, log_scale,
+    /// rotation, opacity, sh_dc, sh_rest (SH band 1), sh_high (SH bands 2-3), lang). Implies grid coding (preset `high` if
+    /// `--quality lossless`).
+    #[arg(long)]
+    pub bits: Option<String>,
+    /// Grid sort refinement passes per radius (PLAS-style, after the k-d layout). 0 (default)
+    /// = the k-d layout only: fastest and, on every real scene measured, the smallest files;
+    /// refinement smooths colours at the cost of position coherence (BENCHMARKS.md "Grid sort").
+    #[arg(long, default_value_t = 0)]
+    pub sort_passes: u32,
+    /// Keep each static Gaussian's rotation as given. By default, scenes without residual GOPs
+    /// store, among the 24 (rotation, axis order) pairs that give the same ellipsoid, the one
+    /// closest to the identity: same rendering, 2-4 bits less per Gaussian.
+    #[arg(long)]
+    pub keep_orientation: bool,
+    /// Store the static Gaussians' positions as grid channels, in the grid sort's order
+    /// (layout 1), as files before format 1.10. By default they are an octree and the
+    /// Gaussians are stored in an order every reader derives from the positions (layouts 2-4,
+    /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file);
+    /// grid positions decode faster (273k Gaussians at `high`: 161-186 ms instead of 238-253,
+    /// in a 6.5 % larger file that also keeps every rotation at full bits; BENCHMARKS.md
+    /// "Decode time")
+    #[arg(long)]
+    pub grid_positions: bool,
+    /// Octree positions: store the rotation of each Gaussian too small for one rotation step
+    /// to move its surface by FACTOR position steps up to 4 bits coarser, one bit per halving
+    /// of its largest scale (layout 3, format-spec §6.5.6). 0 = every rotation at the preset's
+    /// bits (layout 2, as files of format 1.10). The default, 1, makes SH 0 scenes and gsplat
+    /// 1-4 % smaller for 0.00-0.33 dB (BENCHMARKS.md "Coarse rotations"); 2 saves about twice
+    /// as much for up to 1.7 dB. [default: 1, or 0 with --grid-positions]
+    #[arg(long, value_name = "FACTOR")]
+    pub coarse_rotations: Option<f32>,
+    /// Keep the Gaussians no renderer draws. By default a lossy (`--quality` other than
+    /// `lossless`) still scene leaves out every Gaussian whose opacities are below 1/255: they
+    /// never reach the 1/255 alpha at which 3DGS compositing starts, so no pixel changes.
+    #[arg(long)]
+    pub keep_invisible: bool,
+    /// Keep the input's SH degree. By default a lossy still scene is stored only up to the
+    /// highest SH band that holds a non-zero coefficient (the gs3d tiles declare degree 3 with
+    /// bands 1-3 zero everywhere): zero bands add nothing to any colour, so no pixel changes.
+    #[arg(long)]
+    pub keep_sh_degree: bool,
+    /// Write no `META` chunk: no encoder name, input file name or settings in the file (about
+    /// 200 bytes on a still scene; nothing a reader needs to decode). For files whose source
+    /// name should not travel with them, or where every byte counts.
+    #[arg(long)]
+    pub no_meta: bool,
+    /// Lossy canonical coding: leave out codec 5's mixed-context modes, which code some
+    /// channels 1-5 % smaller but decode about 3 times slower per channel. The same quantised
+    /// values (so the same PSNR) in files 1.5-3.1 % larger that decode in about half the time
+    /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores; BENCHMARKS.md
+    /// "Decode time against SOG and SPZ"). Format unchanged: every reader decodes both.
+    #[arg(long, conflicts_with = "mixed_margin")]
+    pub fast_decode: bool,
+    /// Lossy canonical coding: a channel takes codec 5's mixed-context modes only where they
+    /// are this many percent smaller than its best other coding. Between the default and
+    /// `--fast-decode`: the plant's goal row is 0.3 % larger with 2 and decodes 27 % faster,
+    /// 1.2 % larger with 5 and 43 % faster; the 273k scene's 0.2 % and 16 %, 1.1 % and 35 %
+    /// (BENCHMARKS.md "Decode time against SOG and SPZ"). Same values, same PSNR.
+    #[arg(long, value_name = "PERCENT", default_value_t = 100.0 * grid_coder::MIXED_MARGIN)]
+    pub mixed_margin: f64,
+    /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
+    /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
+    /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
+    /// candidates.
+    #[arg(long, value_name = "MOVES", default_value_t = 0)]
+    pub reallocate_bits: usize,
+    /// Lossy still scenes: store each quantised level, among the 9 nearest the value, with the
+    /// least estimated bits plus squared error weighted by the Gaussian's importance (blending
+    /// weight over 36 views of its own, relative to the mean) over TOL (format-spec §6.5.4).
+    /// 0 = nearest levels. 0.1 halves SH 3 scenes like gsplat at -0.02 dB on the benchmark's
+    /// views; views unlike the importance pass's lose more (BENCHMARKS.md). Costs 36 renders
+    /// at 640x480.
+    #[arg(long, value_name = "TOL", default_value_t = 0.0)]
+    pub shape: f64,
+    /// Lossy still scenes: store the least important Gaussians (blending weight over 36 views
+    /// of its own), which together hold at most FRACTION of the total weight, as a second grid
+    /// one bit coarser in every group (format-spec §6.5.2, layout 1). More fractions, each
+    /// smaller, add grids 2, 3, .. bits coarser (`0.04,0.004`). 0 = one grid. Costs 36 renders
+    /// at 640x480. With --shape, every grid is shaped.
+    #[arg(
+        long,
+        value_name = "FRACTION[,FRACTION..]",
+        value_delimiter = ',',
+        default_value = "0"
+    )]
+    pub tiers: Vec<f64>,
+    /// Lossy still scenes: after coding, decode what was stored, fit every Gaussian's colour
+    /// (SH DC) so the decoded scene renders like the source from 36 views of its own (320x240),
+    /// and code the colours again, both as fitted and put on the quantiser's levels; the one
+    /// that 12 other views of its own render closest to the source is stored if it beats the
+    /// first coding (format unchanged). The colours absorb part of the error of the quantised
+    /// positions, shapes and opacities (BENCHMARKS.md "Colour refit"). Codes the scene three
+    /// times, plus the fit. With --target-psnr: the search's closest candidates below the target are
+    /// also tried with the refit (at most 4, each with the cost above).
+    #[arg(long)]
+    pub refit_colours: bool,
+    /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
+    /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
+    /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
+    /// bits one group at a time, and keeps the smallest at or above DB; on scenes with SH bands
+    /// above the DC, level shaping (--shape) is searched the same way, and with octree
+    /// positions the --coarse-rotations factor (0, 1, 1.5, 2, 3 and the one given). If none
+    /// gets there, the scene is stored lossless. Prints the options of the file kept.
+    /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 50-380 s on the
+    /// real scenes, 500 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
+    #[arg(
+        long,
+        value_name = "DB",
+        conflicts_with_all = ["quality", "bits", "tiers", "shape", "reallocate_bits"]
+    )]
+    pub target_psnr: Option<f64>,
+    /// Store raw canonical floats without zstd.
+    #[arg(long)]
+    pub no_zstd: bool,
+    /// zstd level for raw canonical, exact features and MLP chunks.
+    #[arg(long, default_value_t = 9)]
+    pub zstd_level: i32,
+    /// x265 constant rate factor for the time-feature video (the reference uses 6).
+    #[arg(long, default_value_t = 6)]
+    pub crf: u8,
+    /// x265 preset (ultrafast .. placebo).
+    #[arg(long, default_value = "medium")]
+    pub preset: String,
+    /// Lossless HEVC: the 12-bit quantised features exactly.
+    #[arg(long)]
+    pub lossless_features: bool,
+    /// Code every time-feature key as its own intra picture (`TFEA` codec 3), so a seek decodes
+    /// the 2 keys around t instead of the GOP's 7. Bytes and error at the same crf, and the
+    /// seek time it buys, are in BENCHMARKS.md ("Seeking").
+    #[arg(long)]
+    pub intra_features: bool,
+    /// Store time features as exact f32 (zstd) instead of HEVC.
+    #[arg(long)]
+    pub exact_features: bool,
+    /// One quantisation range for all 16 channels, as the reference (default: per channel).
+    #[arg(long)]
+    pub per_gop_range: bool,
+    /// Store MLP weights as f16 (default f32).
+    #[arg(long)]
+    pub mlp_f16: bool,
+    /// Error bounds of explicit residuals (RDLT) per attribute group, e.g.
+    /// `position=1e-4,sh_rest=0.01,lang=exact` (groups: position, log_scale, rotation, sh_dc,
+    /// sh_rest, opacity, lang_opacity, lang). Unlisted groups are exact (bit-identical).
+    #[arg(long)]
+    pub residual_error: Option<String>,
+    /// Binary voxel residual fields (RNTC) of the input: `keep` them, `recode` residual GOPs
+    /// as explicit residuals against the input's decoded states, or `auto` (default): keep
+    /// when the canonical coding is lossless; recode when it is lossy, because a field is a
+    /// function of position and GOP 0's quantised positions would query it elsewhere.
+    #[arg(long, default_value = "auto")]
+    pub ntc: String,
+    /// The scene's language autoencoder decoder (safetensors with `decoder.<i>.weight/bias`,
+    /// see docs/queries.md), stored in the file (LAED chunk) so that players can answer text
+    /// queries. When re-encoding a .dlgs, its decoder is kept unless this is given.
+    #[arg(long)]
+    pub lang_decoder: Option<PathBuf>,
+    /// Canonical negative text embeddings (.npy (K, D) or JSON) stored with the decoder
+    /// (the reference uses CLIP's "object", "things", "stuff", "texture").
+    #[arg(long)]
+    pub negatives: Option<PathBuf>,
+    /// Store the language decoder in f32 (default f16: half the bytes; effect on relevance
+    /// in BENCHMARKS.md).
+    #[arg(long)]
+    pub lang_decoder_f32: bool,
+}
+
+/// `intra`, `sequential` or `parallel` (format-spec §4.1).
+pub fn parse_residual_mode(s: &str) -> Result<ResidualMode> {
+    Ok(match s {
+        "intra" => ResidualMode::Intra,
+        "sequential" => ResidualMode::Sequential,
+        "parallel" => ResidualMode::Parallel,
+        _ => bail!("residual mode `{s}`: expected intra, sequential or parallel"),
+    })
+}
+
+/// `CodecArgs` alone, to read its defaults the way clap fills them.
+#[derive(clap::Parser)]
+struct DefaultCodecArgs {
+    #[command(flatten)]
+    codec: CodecArgs,
+}
+
+impl CodecArgs {
+    /// The options that differ from their defaults, by field name (e.g. `{"quality": "high",
+    /// "tiers": [0.3, 0.05]}`): what `META` records. Every field's Debug form was 570 bytes,
+    /// 2.7 % of a small still scene's file.
+    pub fn changed_settings(&self) -> serde_json::Value {
+        use clap::Parser;
+        let given = serde_json::to_value(self).expect("plain fields serialise");
+        let defaults = DefaultCodecArgs::try_parse_from(["dlgs"])
+            .map(|d| serde_json::to_value(d.codec).expect("plain fields serialise"))
+            .expect("every codec option has a default");
+        match (given, defaults) {
+            (serde_json::Value::Object(g), serde_json::Value::Object(d)) => g
+                .into_iter()
+                .filter(|(k, v)| d.get(k) != Some(v))
+                .collect::<serde_json::Map<_, _>>()
+                .into(),
+            (g, _) => g,
+        }
+    }
+
+    /// Whether `--mixed-margin` was given a value other than its default.
+    pub(crate) fn mixed_margin_given(&self) -> bool {
+        self.mixed_margin != 100.0 * grid_coder::MIXED_MARGIN
+    }
+
+    /// The encoder's margin for codec 5's mixed modes: `None` with `--fast-decode`.
+    fn mixed_margin(&self) -> Result<Option<f64>> {
+        if self.fast_decode {
+            return Ok(None);
+        }
+        let m = self.mixed_margin;
+        if !(0.0..=100.0).contains(&m) {
+            bail!("--mixed-margin {m}: expected a percentage from 0 to 100");
+        }
+        Ok(Some(m / 100.0))
+    }
+
+    /// Whether `--tiers` asks for more than one grid.
+    pub(crate) fn tiered(&self) -> bool {
+        self.tiers.iter().any(|&f| f > 0.0)
+    }
+
+    pub(crate) fn canonical(&self) -> Result<CanonicalCodec> {
+        let mut bits = match (self.quality.as_str(), &self.bits) {
+            ("lossless", None) if self.shape > 0.0 => {
+                bail!("--shape chooses quantised levels: give a lossy --quality (or --bits)")
+            }
+            ("lossless", None) if self.tiered() => {
+                bail!("--tiers stores coarser levels: give a lossy --quality (or --bits)")
+            }
+            ("lossless", None) if self.refit_colours => {
+                bail!(
+                    "--refit-colours refits the colours of a lossy coding: give a lossy \
+                     --quality (or --bits, or --target-psnr)"
+                )
+            }
+            ("lossless", None) if self.fast_decode => {
+                bail!(
+                    "--fast-decode chooses among the lossy grid codings: give a lossy --quality \
+                     (or --bits, or --target-psnr)"
+                )
+            }
+            ("lossless", None) if self.mixed_margin_given() => {
+                bail!(
+                    "--mixed-margin chooses among the lossy grid codings: give a lossy --quality \
+                     (or --bits, or --target-psnr)"
+                )
+            }
+            ("lossless", None) => return Ok(CanonicalCodec::Raw),
+            ("lossless", Some(_)) => QuantBits::HIGH,
+            (q, _) => QuantBits::preset(q).with_context(|| {
+                format!("--quality {q}: expected lossless, near-lossless, high, medium or low")
+            })?,
+        };
+        if let Some(spec) = &self.bits {
+            for kv in spec.split(',').filter(|s| !s.is_empty()) {
+                let (k, v) = kv
+                    .split_once('=')
+                    .with_context(|| format!("--bits: `{kv}` is not key=value"))?;
+                let v: u8 = v
+                    .parse()
+                    .ok()
+                    .filter(|b| (1..=16).contains(b))
+                    .with_context(|| format!("--bits {k}: `{v}` is not 1..=16"))?;
+                *bits
+                    .field_mut(k)
+                    .with_context(|| format!("--bits: unknown attribute `{k}`"))? = v;
+            }
+        }
+        Ok(CanonicalCodec::Sorted {
+            bits,
+            sort: SortSpec {
+                passes: self.sort_passes,
+            },
+        })
+    }
+
+    fn residual(&self) -> Result<ResidualConfig> {
+        // Lossy canonical coding without explicit bounds: residual GOPs as lossy as GOP 0.
+        let mut cfg = ResidualConfig {
+            follow_quantisation: self.residual_error.is_none()
+                && !matches!(self.canonical()?, CanonicalCodec::Raw),
+            ..Default::default()
+        };
+        for kv in self
+            .residual_error
+            .as_deref()
+            .unwrap_or("")
+            .split(',')
+            .filter(|s| !s.is_empty())
+        {
+            let (k, v) = kv
+                .split_once('=')
+                .with_context(|| format!("--residual-error: `{kv}` is not group=bound"))?;
+            let group = AttrGroup::from_name(k)
+                .with_context(|| format!("--residual-error: unknown group `{k}`"))?;
+            let target = if v == "exact" {
+                DeltaTarget::Exact
+            } else {
+                let b: f32 = v
+                    .parse()
+                    .ok()
+                    .filter(|b: &f32| b.is_finite() && *b > 0.0)
+                    .with_context(|| {
+                        format!("--residual-error {k}: `{v}` is not a positive bound or `exact`")
+                    })?;
+                DeltaTarget::Bound(b)
+            };
+            for e in cfg.groups.iter_mut().filter(|e| e.0 == group) {
+                e.1 = target;
+            }
+        }
+        Ok(cfg)
+    }
+
+    pub fn config(&self, meta: serde_json::Value) -> Result<EncoderConfig> {
+        if self.target_psnr.is_some() {
+            bail!(
+                "--target-psnr searches the settings of a still scene (PLY, .splat, SPZ input); \
+                 give --quality (and --bits, --tiers) for this input"
+            );
+        }
+        if !(self.shape.is_finite() && self.shape >= 0.0) {
+            bail!("--shape takes a tolerance >= 0, got {}", self.shape);
+        }
+        if let Some(f) = self
+            .tiers
+            .iter()
+            .find(|f| !(f.is_finite() && (0.0..1.0).contains(*f)))
+        {
+            bail!("--tiers takes weight fractions in [0, 1), got {f}");
+        }
+        if self.tiers.windows(2).any(|w| w[1] > w[0]) {
+            bail!("--tiers fractions must not increase (each coarser grid holds less weight)");
+        }
+        if self.tiers.len() >= dlgs::payload::sorted_grid::MAX_PARTS {
+            bail!(
+                "--tiers: at most {} fractions",
+                dlgs::payload::sorted_grid::MAX_PARTS - 1
+            );
+        }
+        if let Some(f) = self.coarse_rotations {
+            if !(f.is_finite() && f >= 0.0) {
+                bail!("--coarse-rotations takes a factor >= 0, got {f}");
+            }
+            if f > 0.0 && self.grid_positions {
+                bail!("--coarse-rotations needs octree positions: drop --grid-positions");
+            }
+        }
+        if self.sort_passes > 0 && !self.grid_positions {
+            bail!(
+                "--sort-passes orders grid positions: give --grid-positions too (octree \
+                 positions fix the order themselves)"
+            );
+        }
+        Ok(EncoderConfig {
+            canonical: self.canonical()?,
+            raw_codec: if self.no_zstd {
+                RawCodec::None
+            } else {
+                RawCodec::Zstd
+            },
+            zstd_level: self.zstd_level,
+            meta: (!self.no_meta).then_some(meta),
+            features: if self.exact_features {
+                FeatureCodec::Exact
+            } else {
+                FeatureCodec::Hevc(HevcSettings {
+                    crf: self.crf,
+                    preset: self.preset.clone(),
+                    lossless: self.lossless_features,
+                    intra_only: self.intra_features,
+                })
+            },
+            per_gop_range: self.per_gop_range,
+            mlp_weights: if self.mlp_f16 || self.quality == "near-lossless" {
+                WeightType::F16
+            } else {
+                WeightType::F32
+            },
+            residual: self.residual()?,
+            lang_decoder: self.lang_decoder()?,
+            lang_decoder_weights: if self.lang_decoder_f32 {
+                WeightType::F32
+            } else {
+                WeightType::F16
+            },
+            canonical_orientation: !self.keep_orientation,
+            drop_invisible: !self.keep_invisible,
+            trim_zero_sh_bands: !self.keep_sh_degree,
+            compact_records: true,
+            mixed_margin: self.mixed_margin()?,
+            reallocate_bits: self.reallocate_bits,
+            shape_tolerance: self.shape,
+            tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
+            importance: None,
+            octree_positions: !self.grid_positions,
+            refit_colours: self.refit_colours,
+            rotation_coarsening: match self.coarse_rotations {
+                None if self.grid_positions => None,
+                None => Some(RotationCoarsening::DEFAULT),
+                Some(f) if f > 0.0 => Some(RotationCoarsening {
+                    factor: f,
+                    ..RotationCoarsening::DEFAULT
+                }),
+                Some(_) => None,
+            },
+        })
+    }
+
+    /// The decoder given with `--lang-decoder` (and `--negatives`), if any.
+    fn lang_decoder(&self) -> Result<Option<LangDecoder>> {
+        let Some(path) = &self.lang_decoder else {
+            if self.negatives.is_some() {
+                bail!("--negatives is stored with the language decoder: give --lang-decoder too");
+            }
+            return Ok(None);
+        };
+        let mut d = dlgs_query::decoder_io::load_lang_decoder(path)?;
+        if let Some(n) = &self.negatives {
+            let e = dlgs_query::read_embeddings(n)?;
+            if e.dims != d.embed_dims() {
+                bail!(
+                    "{}: negatives have {} dims, the decoder outputs {}",
+                    n.display(),
+                    e.dims,
+                    d.embed_dims()
+                );
+            }
+            d.negatives = e.to_named();
+        }
+        Ok(Some(d))
+    }
+}
