@@ -33,8 +33,10 @@ pub use rotation_coarsening::{
 pub use set_coder::{quantise_set, QuantisedSet};
 pub use writer::{
     breakdown, encode, encode_grid_parts, encode_octree, encode_parts, encode_shaped, PartedGop,
-    MAX_PARTS,
 };
+
+/// Largest number of parts a set may be stored in (layouts 1-4).
+pub const MAX_PARTS: usize = 16;
 
 /// Bits per attribute (1..=16 each; the rotation's dropped-component index always uses 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]

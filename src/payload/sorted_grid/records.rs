@@ -6,7 +6,7 @@ use std::borrow::Cow;
 use super::channels::Kind;
 use super::quantiser::grid_width;
 use super::rotation_coarsening::MAX_ROTATION_SHIFT;
-use super::writer::MAX_PARTS;
+use super::MAX_PARTS;
 use crate::bytes::{ByteReader, PutLe};
 use crate::container::ChunkType;
 use crate::error::{Error, ErrorKind, Result};

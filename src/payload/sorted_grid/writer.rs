@@ -5,7 +5,7 @@ use super::channels::{channels, Kind};
 use super::quantiser::grid_width;
 use super::rotation_coarsening::RotationCoarsening;
 use super::set_coder::{code_set, Channel};
-use super::QuantBits;
+use super::{QuantBits, MAX_PARTS};
 use crate::bytes::PutLe;
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::{Canonical, Gaussians};
@@ -220,9 +220,6 @@ pub fn encode_shaped(
     );
     Ok(out)
 }
-
-/// Largest number of parts a set may be stored in (layout 1).
-pub const MAX_PARTS: usize = 16;
 
 /// Encode a canonical GOP in layout 1 (§6.5.2): the static set as the given parts, each a
 /// sorted grid with its own bits, stored in order (the decoded set is their concatenation);
