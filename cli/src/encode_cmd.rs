@@ -181,9 +181,7 @@ pub fn encode_file(
             .with_context(|| format!("reading {}", input.display()))?;
         if let Some(target) = codec.target_psnr {
             encode_to_target(&g, target, codec, meta(input, settings), &mut out, verbose)?;
-            std::io::Write::flush(&mut out)?;
-            drop(out);
-            pending.commit()?;
+            pending.commit_written(out)?;
             return Ok(1);
         }
         let spinner = if verbose
@@ -210,9 +208,7 @@ pub fn encode_file(
             &mut out,
         )?;
         spinner.finish_and_clear();
-        std::io::Write::flush(&mut out)?;
-        drop(out);
-        pending.commit()?;
+        pending.commit_written(out)?;
         if verbose {
             println!("{} Gaussians (SH {}), still frame", g.len(), g.sh_degree);
             if report.dropped_invisible > 0 {
@@ -297,9 +293,6 @@ pub fn encode_file(
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let mut w = enc.finish()?;
-    std::io::Write::flush(&mut w)?;
-    drop(w);
-    pending.commit()?;
+    pending.commit_written(enc.finish()?)?;
     Ok(scene.frame_count)
 }

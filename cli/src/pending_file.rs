@@ -41,6 +41,14 @@ impl PendingFile {
         Ok(BufWriter::new(f))
     }
 
+    /// Flush `w` (from [`PendingFile::writer`]) and [`commit`](PendingFile::commit).
+    pub fn commit_written(self, mut w: BufWriter<File>) -> Result<()> {
+        std::io::Write::flush(&mut w)
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        drop(w);
+        self.commit()
+    }
+
     /// Move the finished file into place. Dropping a `PendingFile` instead deletes it.
     pub fn commit(self) -> Result<()> {
         // Temporary files are private (0600); outputs get the usual 0644.

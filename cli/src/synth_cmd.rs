@@ -98,10 +98,7 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let mut w = enc.finish()?;
-    std::io::Write::flush(&mut w)?;
-    drop(w);
-    pending.commit()?;
+    pending.commit_written(enc.finish()?)?;
     println!(
         "synthetic dynamic model: {} static + {} dynamic Gaussians, {} GOPs x {} frames at {} FPS, keys every {} frames, residual mode {:?}",
         model.scene.n_static,

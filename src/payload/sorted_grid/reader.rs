@@ -30,16 +30,26 @@ struct SetPlan<'a> {
     chains: Vec<std::ops::Range<usize>>,
 }
 
-/// Read one set's records (§6.5.2) and split them into chains.
-fn plan_set<'a>(
-    r: &mut ByteReader<'a>,
-    n: usize,
+/// What every set record of one kind in a payload shares: the scene's channels, the reader's
+/// limits and how the layout stores the set.
+#[derive(Clone, Copy)]
+struct SetShape<'l> {
     sh_degree: u8,
     lang_width: usize,
-    limits: &Limits,
+    limits: &'l Limits,
     form: SetForm,
     compact: bool,
-) -> Result<SetPlan<'a>> {
+}
+
+/// Read one set's `n` Gaussians' records (§6.5.2) and split them into chains.
+fn plan_set<'a>(r: &mut ByteReader<'a>, n: usize, shape: &SetShape) -> Result<SetPlan<'a>> {
+    let SetShape {
+        sh_degree,
+        lang_width,
+        limits,
+        form,
+        compact,
+    } = *shape;
     let kinds = channels(&Gaussians::new(sh_degree, lang_width));
     limits.check_alloc(
         "CSOG channel cells",
@@ -292,20 +302,10 @@ fn octree_cells(t: &OctreeRecord, n: usize) -> Result<[Vec<u16>; 3]> {
 }
 
 /// Read a set stored as parts (§6.5.7) into one plan per part.
-fn plan_parts<'a>(
-    r: &mut ByteReader<'a>,
-    n: usize,
-    sh_degree: u8,
-    lang_width: usize,
-    limits: &Limits,
-    form: SetForm,
-    compact: bool,
-) -> Result<Vec<SetPlan<'a>>> {
+fn plan_parts<'a>(r: &mut ByteReader<'a>, n: usize, shape: &SetShape) -> Result<Vec<SetPlan<'a>>> {
     let mut plans = Vec::new();
-    read_parts(r, n, compact, |r, np| {
-        plans.push(plan_set(
-            r, np, sh_degree, lang_width, limits, form, compact,
-        )?);
+    read_parts(r, n, shape.compact, |r, np| {
+        plans.push(plan_set(r, np, shape)?);
         Ok(())
     })?;
     Ok(plans)
@@ -331,14 +331,30 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let (sh, lw) = (scene.sh_degree, scene.lang_width());
     let (ns, nd) = (scene.n_static as usize, scene.n_dynamic as usize);
     // Both sets and all their parts are read first and then decoded together (`decode_sets`).
+    let grid = SetShape {
+        sh_degree: sh,
+        lang_width: lw,
+        limits,
+        form: SetForm::Grid,
+        compact: false,
+    };
     let (static_plans, dynamic_plans) = match layout_of(version, at)? {
         None => (
-            vec![plan_set(&mut r, ns, sh, lw, limits, SetForm::Grid, false)?],
-            vec![plan_set(&mut r, nd, sh, lw, limits, SetForm::Grid, false)?],
+            vec![plan_set(&mut r, ns, &grid)?],
+            vec![plan_set(&mut r, nd, &grid)?],
         ),
+        // Dynamic sets are grid sets in every layout.
         Some((form, compact)) => (
-            plan_parts(&mut r, ns, sh, lw, limits, form, compact)?,
-            plan_parts(&mut r, nd, sh, lw, limits, SetForm::Grid, compact)?,
+            plan_parts(
+                &mut r,
+                ns,
+                &SetShape {
+                    form,
+                    compact,
+                    ..grid
+                },
+            )?,
+            plan_parts(&mut r, nd, &SetShape { compact, ..grid })?,
         ),
     };
     if r.remaining() != 0 {

@@ -60,19 +60,47 @@ pub(super) struct CodedSet {
     pub(super) order: Vec<u32>,
 }
 
-/// Quantise and code every channel of a set, in payload order. With `weight` (one per
-/// Gaussian: bits one squared quantisation step of its error is worth) the channels are shaped
-/// first ([`shape_channels`]). With `octree`, positions are coded as an octree and the set is
-/// stored in the order readers derive from them ([`kd_layout`]), not the order given.
-pub(super) fn code_set(
-    g: &Gaussians,
-    bits: &QuantBits,
-    zstd_level: i32,
-    weight: Option<&[f32]>,
-    octree: bool,
-    coarsen: Option<RotationCoarsening>,
-    mixed_margin: Option<f64>,
-) -> CodedSet {
+/// How one set is quantised and coded: everything [`code_set`] takes besides the set.
+#[derive(Clone, Copy)]
+pub(super) struct SetCoding<'a> {
+    pub(super) bits: &'a QuantBits,
+    pub(super) zstd_level: i32,
+    /// One per Gaussian: bits one squared quantisation step of its error is worth; the
+    /// channels are then shaped first ([`shape_channels`]).
+    pub(super) weight: Option<&'a [f32]>,
+    /// Positions as an octree, the set stored in the order readers derive from them
+    /// ([`kd_layout`]), not the order given.
+    pub(super) octree: bool,
+    /// Layout 3's coarse rotations (octree sets only).
+    pub(super) coarsen: Option<RotationCoarsening>,
+    /// Codec 5's mixed modes where they save this fraction; `None` leaves them out.
+    pub(super) mixed_margin: Option<f64>,
+}
+
+impl<'a> SetCoding<'a> {
+    /// A grid set (no octree, shaping or coarse rotations) at the default mixed margin.
+    pub(super) fn grid(bits: &'a QuantBits, zstd_level: i32) -> SetCoding<'a> {
+        SetCoding {
+            bits,
+            zstd_level,
+            weight: None,
+            octree: false,
+            coarsen: None,
+            mixed_margin: Some(grid_coder::MIXED_MARGIN),
+        }
+    }
+}
+
+/// Quantise and code every channel of a set, in payload order.
+pub(super) fn code_set(g: &Gaussians, how: &SetCoding) -> CodedSet {
+    let SetCoding {
+        bits,
+        zstd_level,
+        weight,
+        octree,
+        coarsen,
+        mixed_margin,
+    } = *how;
     let w = grid_width(g.len()).max(1);
     let mut chans = quantise_set(g, bits).channels;
     let mut order: Vec<u32> = (0..g.len() as u32).collect();

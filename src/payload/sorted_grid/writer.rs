@@ -4,7 +4,7 @@
 use super::channels::{channels, Kind};
 use super::quantiser::grid_width;
 use super::rotation_coarsening::RotationCoarsening;
-use super::set_coder::{code_set, Channel};
+use super::set_coder::{code_set, Channel, SetCoding};
 use super::{QuantBits, MAX_PARTS};
 use crate::bytes::PutLe;
 use crate::error::{Error, ErrorKind, Result};
@@ -20,19 +20,8 @@ const OCTREE_HEADER_LEN: usize = 29;
 
 /// Write a set (or, with `octree`, an octree set, §6.5.5), in layout 4's compact records
 /// (§6.5.7) when `compact`; returns the stored order (indices into `g`).
-#[allow(clippy::too_many_arguments)]
-fn encode_set(
-    out: &mut Vec<u8>,
-    g: &Gaussians,
-    bits: &QuantBits,
-    zstd_level: i32,
-    weight: Option<&[f32]>,
-    octree: bool,
-    coarsen: Option<RotationCoarsening>,
-    compact: bool,
-    mixed_margin: Option<f64>,
-) -> Vec<u32> {
-    let coded = code_set(g, bits, zstd_level, weight, octree, coarsen, mixed_margin);
+fn encode_set(out: &mut Vec<u8>, g: &Gaussians, how: &SetCoding, compact: bool) -> Vec<u32> {
+    let (coded, octree) = (code_set(g, how), how.octree);
     if !compact {
         out.put_u32(grid_width(g.len()) as u32);
         out.put_u16(coded.channels.len() as u16);
@@ -120,15 +109,11 @@ pub fn breakdown(
     octree: bool,
 ) -> Vec<(&'static str, usize)> {
     let kinds = channels(g);
-    let coded = code_set(
-        g,
-        bits,
-        zstd_level,
-        None,
+    let how = SetCoding {
         octree,
-        None,
-        Some(grid_coder::MIXED_MARGIN),
-    );
+        ..SetCoding::grid(bits, zstd_level)
+    };
+    let coded = code_set(g, &how);
     let tree = coded
         .octree
         .as_ref()
@@ -196,28 +181,13 @@ pub fn encode_shaped(
     c.statics.check_finite()?;
     c.dynamics.check_finite()?;
     let mut out = vec![0u8]; // layout version
-    encode_set(
-        &mut out,
-        &c.statics,
-        bits,
-        zstd_level,
-        static_weight,
-        false,
-        None,
-        false,
-        Some(grid_coder::MIXED_MARGIN),
-    );
-    encode_set(
-        &mut out,
-        &c.dynamics,
-        bits,
-        zstd_level,
-        None,
-        false,
-        None,
-        false,
-        Some(grid_coder::MIXED_MARGIN),
-    );
+    let grid = SetCoding::grid(bits, zstd_level);
+    let statics = SetCoding {
+        weight: static_weight,
+        ..grid
+    };
+    encode_set(&mut out, &c.statics, &statics, false);
+    encode_set(&mut out, &c.dynamics, &grid, false);
     Ok(out)
 }
 
@@ -325,17 +295,15 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
     for (g, b) in static_parts {
         put_count(&mut out, g.len());
         let weight = gop.static_weight.map(|w| &w[start..start + g.len()]);
-        let local = encode_set(
-            &mut out,
-            g,
-            b,
+        let how = SetCoding {
+            bits: b,
             zstd_level,
             weight,
             octree,
             coarsen,
-            compact,
-            gop.mixed_margin,
-        );
+            mixed_margin: gop.mixed_margin,
+        };
+        let local = encode_set(&mut out, g, &how, compact);
         order.extend(local.into_iter().map(|i| i + start as u32));
         start += g.len();
     }
@@ -346,17 +314,11 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
     } else {
         out.put_u8(1);
         put_count(&mut out, gop.dynamics.len());
-        encode_set(
-            &mut out,
-            gop.dynamics,
-            gop.dynamic_bits,
-            zstd_level,
-            None,
-            false,
-            None,
-            compact,
-            gop.mixed_margin,
-        );
+        let how = SetCoding {
+            mixed_margin: gop.mixed_margin,
+            ..SetCoding::grid(gop.dynamic_bits, zstd_level)
+        };
+        encode_set(&mut out, gop.dynamics, &how, compact);
     }
     Ok((out, order))
 }
