@@ -22,6 +22,10 @@
 # benchmark views>`: the encoder's own search, on views of its own (BENCHMARKS.md "Target PSNR").
 # EXTRA="OPTIONS": appended to every row's options (e.g. EXTRA=--fast-decode OUT=target/goal_rows_fast:
 # the same rows in files that decode faster, BENCHMARKS.md "Decode time against SOG and SPZ").
+# WIDE=N: one more column, the mean PSNR over N orbit cameras (`dlgs compare --orbit N`; the 8 default views
+# are every (N/8)-th of them when N is a multiple of 8) for ours and SOG's: a single view's PSNR moves by several dB
+# with any change of levels at these qualities, so 8 views are a small sample (BENCHMARKS.md "Where we are").
+# Each row then renders 2 x N more views at 1352x1014.
 # Usage: bash scripts/goal_rows.sh  (~5 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh)
 set -euo pipefail
@@ -34,10 +38,15 @@ DLGS=target/release/dlgs
 export RUST_BACKTRACE=0
 [ -f target/big.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- target/big.ply
 [ -f target/mosaic.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- --mosaic target/mosaic.ply
-metric() { $DLGS compare "$1" "$2" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
+metric() { $DLGS compare "$1" "$2" --orbit "${3:-8}" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
 peer() { awk -F'\t' -v n="$2" -v f="$3" '$1==n && $2==f {print $3}' "$1/times.tsv"; }
-echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB (SOG's) | SSIM (SOG's) | encode s |"
-echo "|---|---|---|---|---|---|---|---|"
+if [ -n "${WIDE:-}" ]; then
+  echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB (SOG's) | SSIM (SOG's) | encode s | PSNR dB on $WIDE views (SOG's) |"
+  echo "|---|---|---|---|---|---|---|---|---|"
+else
+  echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB (SOG's) | SSIM (SOG's) | encode s |"
+  echo "|---|---|---|---|---|---|---|---|"
+fi
 row() { # peers_dir scene_file options...
   local peers=$1 src=$2; shift 2
   local name; name=$(basename "${src%.*}")
@@ -50,9 +59,15 @@ row() { # peers_dir scene_file options...
   start=$(date +%s.%N); $DLGS encode "$src" -o "$f" "$@" > /dev/null; end=$(date +%s.%N)
   read -r p s <<< "$(metric "$src" "$f")"
   local b; b=$(stat -c %s "$f")
-  printf '| %s | `%s` | %s | %.1f %% | %.1f %% | %s (%s) | %s (%s) | %.1f |\n' "$name" "$*" "$b" \
+  local wide=""
+  if [ -n "${WIDE:-}" ]; then
+    read -r wp _ <<< "$(metric "$src" "$f" "$WIDE")"
+    read -r wsp _ <<< "$(metric "$src" "$peers/$name.sog.ply" "$WIDE")"
+    wide=" $wp ($wsp) |"
+  fi
+  printf '| %s | `%s` | %s | %.1f %% | %.1f %% | %s (%s) | %s (%s) | %.1f |%s\n' "$name" "$*" "$b" \
     "$(echo "100 * $b / $sog" | bc -l)" "$(echo "100 * $b / $spz" | bc -l)" "$p" "$sp" "$s" "$ss" \
-    "$(echo "$end - $start" | bc)"
+    "$(echo "$end - $start" | bc)" "$wide"
 }
 row target/peers "$DATA/ply/gs3d-fork_lod3_tile_0_1971_sh3.ply" --no-meta --bits position=13,log_scale=9,rotation=9,opacity=8,sh_dc=8 --tiers 0.5,0.2 --coarse-rotations 2 --refit-colours
 row target/peers "$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply" --no-meta --bits position=11,log_scale=7,rotation=7,opacity=8,sh_dc=7,sh_rest=4,sh_high=5 --tiers 0.15,0.02 --shape 0.15 --refit-colours
