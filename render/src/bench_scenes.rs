@@ -27,18 +27,54 @@ pub fn plant() -> Gaussians {
 /// (moved only), which SOG codes for 70 % of the first copy's bytes (dlgs: 91 %; BENCHMARKS.md):
 /// [`mosaic`] has no repeats.
 pub fn big() -> Gaussians {
+    big_with_copy_order(false)
+}
+
+/// The same 272,920 Gaussians as [`big`], with the second plant's Gaussians in a fixed shuffled
+/// order. The scene renders the same, but no byte-level coder can match the second copy's
+/// attribute runs against the first's: SPZ v4's zstd streams do (BENCHMARKS.md "The 273k
+/// scene's repeat and SPZ"), our coder sorts every scene into an order of its own anyway.
+pub fn big_copy_shuffled() -> Gaussians {
+    big_with_copy_order(true)
+}
+
+fn big_with_copy_order(shuffle: bool) -> Gaussians {
     let plant = plant();
     let mut out = plant.clone();
     let mut second = plant;
     for p in &mut second.positions {
         p[0] += 0.6;
     }
-    out.extend(&second);
+    if shuffle {
+        for i in shuffled_indices(second.len(), 0x5eed_d195) {
+            out.push_from(&second, i);
+        }
+    } else {
+        out.extend(&second);
+    }
     out.extend(&fit_into(
         load("ply/v3dg_donut_mipsplatting_45624_sh0.ply"),
         [0.3, -0.2, 0.0],
     ));
     out
+}
+
+/// `0..n` in a Fisher-Yates order drawn from a SplitMix64 stream: the same on every machine.
+fn shuffled_indices(n: usize, seed: u64) -> Vec<usize> {
+    let mut state = seed;
+    let mut next = || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    let mut order: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        let j = (next() % (i as u64 + 1)) as usize;
+        order.swap(i, j);
+    }
+    order
 }
 
 /// 209,435 Gaussians: every real scene of the data set once (no repeats), at SH 0: the plant
@@ -114,6 +150,44 @@ pub fn with_language(g: &Gaussians) -> Gaussians {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The shuffled 273k scene holds the same Gaussians as `big` (as a multiset of records), the
+    /// first plant and the donut in place, and the second plant in another order.
+    #[test]
+    fn shuffled_big_is_big_reordered() {
+        let a = big();
+        let b = big_copy_shuffled();
+        assert_eq!(a.len(), b.len());
+        let n = plant().len();
+        let record = |g: &Gaussians, i: usize| {
+            let mut r: Vec<u32> = g.positions[i].map(f32::to_bits).to_vec();
+            r.extend(g.log_scales[i].map(f32::to_bits));
+            r.extend(g.rotations[i].map(f32::to_bits));
+            r.push(g.opacity[i].to_bits());
+            r.extend(g.sh_of(i).iter().map(|v| v.to_bits()));
+            r
+        };
+        for i in (0..n).chain(2 * n..a.len()) {
+            assert_eq!(record(&a, i), record(&b, i), "Gaussian {i} moved");
+        }
+        let mut ra: Vec<Vec<u32>> = (n..2 * n).map(|i| record(&a, i)).collect();
+        let mut rb: Vec<Vec<u32>> = (n..2 * n).map(|i| record(&b, i)).collect();
+        let unmoved = (0..n).filter(|&k| ra[k] == rb[k]).count();
+        assert!(unmoved < n / 100, "{unmoved} of {n} left in place");
+        ra.sort_unstable();
+        rb.sort_unstable();
+        assert_eq!(ra, rb);
+    }
+
+    #[test]
+    fn shuffled_indices_are_a_permutation() {
+        let mut o = shuffled_indices(1000, 1);
+        assert_ne!(o, (0..1000).collect::<Vec<_>>());
+        o.sort_unstable();
+        assert_eq!(o, (0..1000).collect::<Vec<_>>());
+        assert!(shuffled_indices(0, 1).is_empty());
+        assert_eq!(shuffled_indices(1, 1), vec![0]);
+    }
 
     /// The mosaic holds every real scene once: its size is their sum, nothing repeats, and
     /// each of the six fitted scenes lies in its 0.3 box (the plant keeps its own place).
