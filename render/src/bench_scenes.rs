@@ -59,21 +59,10 @@ fn big_with_copy_order(shuffle: bool) -> Gaussians {
     out
 }
 
-/// `0..n` in a Fisher-Yates order drawn from a SplitMix64 stream: the same on every machine.
+/// `0..n` in an order drawn from `seed` (fastrand's shuffle: the same on every machine).
 fn shuffled_indices(n: usize, seed: u64) -> Vec<usize> {
-    let mut state = seed;
-    let mut next = || {
-        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    };
     let mut order: Vec<usize> = (0..n).collect();
-    for i in (1..n).rev() {
-        let j = (next() % (i as u64 + 1)) as usize;
-        order.swap(i, j);
-    }
+    fastrand::Rng::with_seed(seed).shuffle(&mut order);
     order
 }
 
