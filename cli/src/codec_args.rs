@@ -128,7 +128,8 @@ pub struct CodecArgs {
     /// bits one group at a time, and keeps the smallest at or above DB; on scenes with SH bands
     /// above the DC, level shaping (--shape) is searched the same way, and with octree
     /// positions the --coarse-rotations factor (0, 1, 1.5, 2, 3 and the one given). If none
-    /// gets there, the scene is stored lossless. Prints the options of the file kept.
+    /// gets there, the scene is stored lossless (at once for DB above 100, the cap each view's
+    /// PSNR counts at). Prints the options of the file kept.
     /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 50-380 s on the
     /// real scenes, 500 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
     #[arg(

@@ -67,7 +67,7 @@ fn encode_to_target(
     out: &mut impl std::io::Write,
     verbose: bool,
 ) -> Result<()> {
-    use dlgs_encoder::quality_search::{compare_views_psnr, smallest_at};
+    use dlgs_encoder::quality_search::{compare_views_psnr, smallest_at, PSNR_CAP};
     if !(target.is_finite() && target > 0.0) {
         bail!("--target-psnr takes a PSNR in dB > 0, got {target}");
     }
@@ -78,6 +78,22 @@ fn encode_to_target(
         ..codec.clone()
     };
     let cfg = base.config(meta)?;
+    if target > PSNR_CAP {
+        // The search counts each view at most PSNR_CAP: no candidate could reach the target,
+        // and coding them all would take minutes.
+        if verbose {
+            println!(
+                "  {target:.2} dB is above the search's cap of {PSNR_CAP} dB per view: \
+                 storing the scene lossless"
+            );
+        }
+        let lossless = EncoderConfig {
+            canonical: CanonicalCodec::Raw,
+            ..cfg
+        };
+        dlgs_encoder::encode_still(g, lossless, out)?;
+        return Ok(());
+    }
     let bar = if verbose {
         ProgressBar::new_spinner().with_style(
             indicatif::ProgressStyle::with_template(

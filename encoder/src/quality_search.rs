@@ -42,8 +42,9 @@ pub const TIER_SETS: [&[f64]; 6] = [
     &[0.5, 0.2],
 ];
 
-/// A per-view PSNR above this counts as this (identical views would make the mean infinite).
-const PSNR_CAP: f64 = 100.0;
+/// A per-view PSNR above this counts as this (identical views would make the mean infinite),
+/// so no candidate reaches a target above it.
+pub const PSNR_CAP: f64 = 100.0;
 
 /// One coded candidate.
 #[derive(Debug, Clone)]
@@ -135,6 +136,12 @@ pub const REFINE_STEPS: usize = 3;
 /// the same position error covers more pixels in a larger image (real plant: 57.70 dB at 640 x
 /// 480, 56.66 dB at 1352 x 1014, same cameras and file).
 pub fn search_views(g: &Gaussians) -> Vec<Camera> {
+    let size = OrbitSpec::default();
+    search_views_sized(g, (size.width, size.height))
+}
+
+/// [`search_views`] at another image size (width, height).
+fn search_views_sized(g: &Gaussians, (width, height): (u32, u32)) -> Vec<Camera> {
     let mut cams = Vec::new();
     for elevation_deg in [5.0, 35.0] {
         cams.extend(orbit_cameras(
@@ -142,6 +149,8 @@ pub fn search_views(g: &Gaussians) -> Vec<Camera> {
             &OrbitSpec {
                 count: 6,
                 elevation_deg,
+                width,
+                height,
                 ..OrbitSpec::default()
             },
         ));
@@ -199,6 +208,20 @@ pub fn smallest_at(
     base: &EncoderConfig,
     progress: impl FnMut(&Trial),
 ) -> Result<Found> {
+    let size = OrbitSpec::default();
+    smallest_at_view_size(g, target_db, base, (size.width, size.height), progress)
+}
+
+/// [`smallest_at`] judging candidates on [`search_views`] rendered at `view_size` (width,
+/// height) instead of `dlgs compare`'s size: smaller views make the search faster (the unit
+/// tests use them) but judge position errors more leniently.
+pub fn smallest_at_view_size(
+    g: &Gaussians,
+    target_db: f64,
+    base: &EncoderConfig,
+    view_size: (u32, u32),
+    progress: impl FnMut(&Trial),
+) -> Result<Found> {
     let sort = match base.canonical {
         CanonicalCodec::Sorted { sort, .. } => sort,
         CanonicalCodec::Raw => crate::SortSpec::DEFAULT,
@@ -222,7 +245,7 @@ pub fn smallest_at(
         .canonical_orientation
         .then(|| orientation::closest_to_identity(coded));
     let blend: Arc<[f64]> = importance::blend_weights(oriented.as_ref().unwrap_or(coded)).into();
-    let cams = search_views(g);
+    let cams = search_views_sized(g, view_size);
     let start_factor = base.rotation_coarsening.map_or(0.0, |c| c.factor);
     // The factors moved through: none but `base`'s without octree positions.
     let mut factors = vec![start_factor];
@@ -547,6 +570,22 @@ fn decode_still(file: &[u8]) -> Result<Gaussians> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::OnceLock;
+
+    /// The tests judge candidates on small views: the search's logic is the same at any size,
+    /// and at `dlgs compare`'s size each search of the scene below took 45-70 s.
+    const VIEW_SIZE: (u32, u32) = (320, 240);
+
+    fn search(g: &Gaussians, target_db: f64, base: &EncoderConfig) -> Found {
+        smallest_at_view_size(g, target_db, base, VIEW_SIZE, |_| {}).unwrap()
+    }
+
+    /// The search of [`scene`] at 40 dB with the default configuration, run once for the tests
+    /// that look at it.
+    fn plain_search() -> &'static Found {
+        static FOUND: OnceLock<Found> = OnceLock::new();
+        FOUND.get_or_init(|| search(&scene(), 40.0, &EncoderConfig::default()))
+    }
 
     /// A small generated scene (the CLI test runs the search on a real one): a grid of
     /// coloured, anisotropic Gaussians.
@@ -567,7 +606,7 @@ mod tests {
     #[test]
     fn the_smallest_candidate_at_the_target_is_kept_and_decodes_to_its_psnr() {
         let g = scene();
-        let found = smallest_at(&g, 40.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let found = plain_search();
         let (i, file) = found.best.clone().expect("a preset reaches 40 dB");
         let best = &found.trials[i];
         assert!(best.psnr >= 40.0);
@@ -576,7 +615,7 @@ mod tests {
             assert!(t.psnr < 40.0 || t.bytes >= best.bytes, "{t:?} vs {best:?}");
         }
         // The kept file is the candidate measured: decoding it again gives the same PSNR.
-        let cams = search_views(&g);
+        let cams = search_views_sized(&g, VIEW_SIZE);
         let again = mean_psnr(
             &bit_allocation::render_views(&g, &cams).unwrap(),
             &bit_allocation::render_views(&decode_still(&file).unwrap(), &cams).unwrap(),
@@ -594,7 +633,7 @@ mod tests {
     fn shaping_is_searched_where_sh_bands_are_stored() {
         // The generated scene at SH 0 never shapes; with view-dependent colour (SH 1) the
         // shaped candidates are coded, and whichever is kept reaches the target.
-        let flat = smallest_at(&scene(), 40.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let flat = plain_search();
         assert!(flat.trials.iter().all(|t| t.shape == 0.0));
         let mut g = scene();
         g.sh_degree = 1;
@@ -618,7 +657,7 @@ mod tests {
                 ]
             })
             .collect();
-        let found = smallest_at(&g, 40.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let found = search(&g, 40.0, &EncoderConfig::default());
         let shaped: Vec<&Trial> = found.trials.iter().filter(|t| t.shape > 0.0).collect();
         assert!(!shaped.is_empty());
         assert!(shaped.iter().all(|t| SHAPE_LEVELS.contains(&t.shape)));
@@ -632,8 +671,7 @@ mod tests {
 
     #[test]
     fn an_unreachable_target_keeps_nothing() {
-        let found =
-            smallest_at(&scene(), PSNR_CAP + 1.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let found = search(&scene(), PSNR_CAP + 1.0, &EncoderConfig::default());
         assert!(found.best.is_none());
         // With nothing to beat, every preset of every tier set is coded (near-lossless is above
         // the cap on no view, so refinement adds bits to it).
@@ -646,13 +684,12 @@ mod tests {
 
     #[test]
     fn with_the_refit_the_closest_candidates_below_are_coded_again_at_the_end() {
-        let g = scene();
-        let plain = smallest_at(&g, 40.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let plain = plain_search();
         let cfg = EncoderConfig {
             refit_colours: true,
             ..Default::default()
         };
-        let found = smallest_at(&g, 40.0, &cfg, |_| {}).unwrap();
+        let found = search(&scene(), 40.0, &cfg);
         // The search runs as without the refit; the refit trials come after it.
         let n = plain.trials.len();
         let key = |t: &Trial| (t.label.clone(), t.bytes, t.psnr.to_bits(), t.refit);
@@ -727,7 +764,7 @@ mod tests {
 
     #[test]
     fn the_coarse_rotation_factor_is_searched_with_octree_positions_only() {
-        let found = smallest_at(&scene(), 40.0, &EncoderConfig::default(), |_| {}).unwrap();
+        let found = plain_search();
         let mut factors: Vec<f32> = found.trials.iter().map(|t| t.rotations).collect();
         factors.sort_by(f32::total_cmp);
         factors.dedup();
@@ -739,16 +776,16 @@ mod tests {
         assert!(found.trials[..PRESETS.len()]
             .iter()
             .all(|t| t.rotations == RotationCoarsening::DEFAULT.factor));
-        let (i, file) = found.best.expect("a candidate reaches 40 dB");
-        assert!(found.trials[i].psnr >= 40.0);
-        assert_eq!(found.trials[i].bytes, file.len());
+        let (i, file) = found.best.as_ref().expect("a candidate reaches 40 dB");
+        assert!(found.trials[*i].psnr >= 40.0);
+        assert_eq!(found.trials[*i].bytes, file.len());
         // Grid positions have no coarse rotations to move.
         let grid = EncoderConfig {
             octree_positions: false,
             rotation_coarsening: None,
             ..EncoderConfig::default()
         };
-        let found = smallest_at(&scene(), 40.0, &grid, |_| {}).unwrap();
+        let found = search(&scene(), 40.0, &grid);
         assert!(found.trials.iter().all(|t| t.rotations == 0.0));
     }
 }

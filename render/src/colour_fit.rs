@@ -94,6 +94,73 @@ impl View {
         img
     }
 
+    /// The residual image `b - sum_i w_i x_i` ([`Self::forward`]), with its [`Self::backward`]
+    /// added to `out` (and `diag`), from one walk of each tile instead of two: a tile's
+    /// residual depends on that tile's pixels only. The same floats as the two calls.
+    fn residual_and_backward(
+        &self,
+        x: &[[f32; 3]],
+        b: &[f32],
+        out: &mut [[f64; 3]],
+        mut diag: Option<&mut [f64]>,
+    ) -> Vec<f32> {
+        type TileResult = (Vec<[f32; 3]>, Vec<([f64; 3], f64)>);
+        let tiles: Vec<TileResult> = (0..self.lists.len())
+            .into_par_iter()
+            .map(|i| {
+                let (x0, y0, w, h) = self.tile_rect(i);
+                let list = &self.lists[i];
+                let mut visits: Vec<(u32, u32, f32)> = Vec::new();
+                let mut acc = vec![[0.0f32; 3]; (w * h) as usize];
+                for_each_weight(&self.splats, list, (x0, y0, w, h), |slot, px, py, wgt| {
+                    let l = (py - y0) * w + (px - x0);
+                    visits.push((slot as u32, l, wgt));
+                    let c = &x[self.splats[list[slot] as usize].index as usize];
+                    let a = &mut acc[l as usize];
+                    for ch in 0..3 {
+                        a[ch] += wgt * c[ch];
+                    }
+                });
+                // acc becomes the tile's residual.
+                for (l, a) in acc.iter_mut().enumerate() {
+                    let (lx, ly) = (l as u32 % w, l as u32 / w);
+                    let p = ((y0 + ly) * self.width + x0 + lx) as usize;
+                    for ch in 0..3 {
+                        a[ch] = b[p * 3 + ch] - a[ch];
+                    }
+                }
+                let mut sums = vec![([0.0f64; 3], 0.0f64); list.len()];
+                for &(slot, l, wgt) in &visits {
+                    let s = &mut sums[slot as usize];
+                    for ch in 0..3 {
+                        s.0[ch] += (wgt * acc[l as usize][ch]) as f64;
+                    }
+                    s.1 += (wgt * wgt) as f64;
+                }
+                (acc, sums)
+            })
+            .collect();
+        let mut r = vec![0.0f32; (self.width * self.height * 3) as usize];
+        for (i, (res, sums)) in tiles.into_iter().enumerate() {
+            let (x0, y0, w, _) = self.tile_rect(i);
+            for (l, c) in res.iter().enumerate() {
+                let (lx, ly) = (l as u32 % w, l as u32 / w);
+                let p = ((y0 + ly) * self.width + x0 + lx) as usize;
+                r[p * 3..p * 3 + 3].copy_from_slice(c);
+            }
+            for (&k, (s, d)) in self.lists[i].iter().zip(sums) {
+                let g = self.splats[k as usize].index as usize;
+                for ch in 0..3 {
+                    out[g][ch] += s[ch];
+                }
+                if let Some(diag) = diag.as_deref_mut() {
+                    diag[g] += d;
+                }
+            }
+        }
+        r
+    }
+
     /// Adds `sum_p w_ip r_p` to `out[i]` (and `sum_p w_ip^2` to `diag[i]` when given) for every
     /// Gaussian `i`, for the 3-channel image `r`.
     fn backward(&self, r: &[f32], out: &mut [[f64; 3]], mut diag: Option<&mut [f64]>) {
@@ -304,10 +371,8 @@ pub fn snap_colour_offsets(
         let mut grad = vec![[0.0f64; 3]; n];
         let mut cost = 0.0f64;
         for (v, b) in views.iter().zip(&base) {
-            let ax = v.forward(&x);
-            let r: Vec<f32> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
+            let r = v.residual_and_backward(&x, b, &mut grad, (step == 0).then_some(&mut diag[..]));
             cost += r.iter().map(|&e| (e as f64) * (e as f64)).sum::<f64>();
-            v.backward(&r, &mut grad, (step == 0).then_some(&mut diag[..]));
         }
         cost += damping
             * x.iter()
@@ -400,6 +465,28 @@ mod tests {
             .sum();
         assert!(lhs.abs() > 1.0, "{lhs}");
         assert!((lhs - rhs).abs() < 1e-4 * lhs.abs(), "{lhs} vs {rhs}");
+    }
+
+    #[test]
+    fn the_fused_pass_gives_the_floats_of_forward_then_backward() {
+        let g = blob(150);
+        let v = View::new(&g, &cams(&g, 1)[0]);
+        let x: Vec<[f32; 3]> = (0..g.len())
+            .map(|i| [(i as f32).sin(), (i as f32 * 0.3).cos(), 0.5])
+            .collect();
+        let b: Vec<f32> = (0..(v.width * v.height * 3) as usize)
+            .map(|k| ((k * 7919) % 101) as f32 / 100.0)
+            .collect();
+        let ax = v.forward(&x);
+        let r: Vec<f32> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
+        let (mut grad, mut diag) = (vec![[0.0f64; 3]; g.len()], vec![0.0f64; g.len()]);
+        v.backward(&r, &mut grad, Some(&mut diag));
+        let (mut grad2, mut diag2) = (vec![[0.0f64; 3]; g.len()], vec![0.0f64; g.len()]);
+        let r2 = v.residual_and_backward(&x, &b, &mut grad2, Some(&mut diag2));
+        assert_eq!(r, r2);
+        assert_eq!(grad, grad2);
+        assert_eq!(diag, diag2);
+        assert!(diag.iter().filter(|&&d| d > 0.0).count() > 100);
     }
 
     #[test]

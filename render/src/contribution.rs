@@ -60,7 +60,13 @@ pub fn for_each_weight(
     mut visit: impl FnMut(usize, u32, u32, f32),
 ) {
     let mut t = vec![1.0f32; (w * h) as usize];
+    // Pixels finished so far: once all are, no later splat adds to the tile (the raster's
+    // early stop; on the opaque donut most of the fit's time was spent after it).
+    let mut finished = 0usize;
     for (slot, &k) in list.iter().enumerate() {
+        if finished == t.len() {
+            break;
+        }
         let s = &splats[k as usize];
         let [ca, cb, cc] = s.conic;
         let xs = (s.px[0] as u32).max(x0)..(s.px[2] as u32).min(x0 + w);
@@ -82,6 +88,7 @@ pub fn for_each_weight(
                 if next < T_MIN {
                     // The pixel is finished; this Gaussian is not added (the raster rule).
                     t[p] = 0.0;
+                    finished += 1;
                     continue;
                 }
                 visit(slot, x, y, a * t[p]);
