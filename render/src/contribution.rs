@@ -63,6 +63,8 @@ pub fn for_each_weight(
     // Pixels finished so far: once all are, no later splat adds to the tile (the raster's
     // early stop; on the opaque donut most of the fit's time was spent after it).
     let mut finished = 0usize;
+    // The same per row: a splat skips the rows of the tile that are finished.
+    let mut row_finished = vec![0u32; h as usize];
     for (slot, &k) in list.iter().enumerate() {
         if finished == t.len() {
             break;
@@ -72,6 +74,9 @@ pub fn for_each_weight(
         let xs = (s.px[0] as u32).max(x0)..(s.px[2] as u32).min(x0 + w);
         let ys = (s.px[1] as u32).max(y0)..(s.px[3] as u32).min(y0 + h);
         for y in ys {
+            if row_finished[(y - y0) as usize] == w {
+                continue;
+            }
             let dy = y as f32 - s.mean[1];
             for x in xs.clone() {
                 let p = ((y - y0) * w + (x - x0)) as usize;
@@ -89,6 +94,7 @@ pub fn for_each_weight(
                     // The pixel is finished; this Gaussian is not added (the raster rule).
                     t[p] = 0.0;
                     finished += 1;
+                    row_finished[(y - y0) as usize] += 1;
                     continue;
                 }
                 visit(slot, x, y, a * t[p]);
