@@ -157,6 +157,47 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn finished_pixels_and_rows_end_the_walk_without_changing_the_totals() {
+        // Opaque Gaussians stacked along the view axis: most pixels they cover finish (the
+        // walk then skips those rows and tiles), and the totals still match the image.
+        let mut g = blob(400);
+        for (i, p) in g.positions.iter_mut().enumerate() {
+            p[0] = (i % 20) as f32 * 0.01 - 0.1;
+            p[1] = (i / 20 % 5) as f32 * 0.01;
+        }
+        g.opacity.iter_mut().for_each(|o| *o = 9.0);
+        let cams = orbit_cameras(
+            &g,
+            &OrbitSpec {
+                count: 2,
+                width: 96,
+                height: 72,
+                ..OrbitSpec::default()
+            },
+        );
+        let c = contributions(&g, &cams);
+        let mut finished = 0;
+        let covered: f64 = cams
+            .iter()
+            .map(|cam| {
+                let img = crate::render(&g, cam, &Default::default()).unwrap();
+                // A finished pixel keeps the transmittance it stopped at (>= T_MIN).
+                finished += img.transmittance.iter().filter(|&&t| t < 1e-3).count();
+                img.transmittance
+                    .iter()
+                    .map(|&t| 1.0 - t as f64)
+                    .sum::<f64>()
+            })
+            .sum();
+        assert!(finished > 100, "{finished} finished pixels");
+        let total: f64 = c.iter().sum();
+        assert!(
+            (total - covered).abs() < 1e-4 * covered,
+            "{total} vs {covered}"
+        );
+    }
+
+    #[test]
     fn same_result_on_any_thread_count() {
         let g = blob(300);
         let cams = orbit_cameras(
