@@ -573,7 +573,7 @@ mod tests {
     use std::sync::OnceLock;
 
     /// The tests judge candidates on small views: the search's logic is the same at any size,
-    /// and at `dlgs compare`'s size each search of the scene below took 45-70 s.
+    /// and at `dlgs compare`'s size each search of the scene below took 45-90 s (two tests at a time).
     const VIEW_SIZE: (u32, u32) = (320, 240);
 
     fn search(g: &Gaussians, target_db: f64, base: &EncoderConfig) -> Found {
