@@ -52,6 +52,32 @@ impl View {
         )
     }
 
+    /// The image pixel of pixel `l` (row-major) of the tile at `rect` ([`Self::tile_rect`]).
+    fn tile_pixel(&self, (x0, y0, w, _): (u32, u32, u32, u32), l: usize) -> usize {
+        let (lx, ly) = (l as u32 % w, l as u32 / w);
+        ((y0 + ly) * self.width + x0 + lx) as usize
+    }
+
+    /// Adds tile `i`'s per-slot sums (colour, squared weight) to their Gaussians' `out` and
+    /// `diag`, in list order.
+    fn add_tile_sums(
+        &self,
+        i: usize,
+        sums: Vec<([f64; 3], f64)>,
+        out: &mut [[f64; 3]],
+        diag: &mut Option<&mut [f64]>,
+    ) {
+        for (&k, (s, d)) in self.lists[i].iter().zip(sums) {
+            let g = self.splats[k as usize].index as usize;
+            for ch in 0..3 {
+                out[g][ch] += s[ch];
+            }
+            if let Some(diag) = diag.as_deref_mut() {
+                diag[g] += d;
+            }
+        }
+    }
+
     /// `visit(slot in list, pixel index in the image, blending weight)` for every pixel a
     /// splat of tile `i` adds to ([`for_each_weight`]).
     fn walk_tile(&self, i: usize, mut visit: impl FnMut(usize, usize, f32)) {
@@ -84,10 +110,9 @@ impl View {
             .collect();
         let mut img = vec![0.0f32; (self.width * self.height * 3) as usize];
         for (i, acc) in tiles.iter().enumerate() {
-            let (x0, y0, w, _) = self.tile_rect(i);
+            let rect = self.tile_rect(i);
             for (l, c) in acc.iter().enumerate() {
-                let (lx, ly) = (l as u32 % w, l as u32 / w);
-                let p = ((y0 + ly) * self.width + x0 + lx) as usize;
+                let p = self.tile_pixel(rect, l);
                 img[p * 3..p * 3 + 3].copy_from_slice(c);
             }
         }
@@ -123,8 +148,7 @@ impl View {
                 });
                 // acc becomes the tile's residual.
                 for (l, a) in acc.iter_mut().enumerate() {
-                    let (lx, ly) = (l as u32 % w, l as u32 / w);
-                    let p = ((y0 + ly) * self.width + x0 + lx) as usize;
+                    let p = self.tile_pixel((x0, y0, w, h), l);
                     for ch in 0..3 {
                         a[ch] = b[p * 3 + ch] - a[ch];
                     }
@@ -142,21 +166,12 @@ impl View {
             .collect();
         let mut r = vec![0.0f32; (self.width * self.height * 3) as usize];
         for (i, (res, sums)) in tiles.into_iter().enumerate() {
-            let (x0, y0, w, _) = self.tile_rect(i);
+            let rect = self.tile_rect(i);
             for (l, c) in res.iter().enumerate() {
-                let (lx, ly) = (l as u32 % w, l as u32 / w);
-                let p = ((y0 + ly) * self.width + x0 + lx) as usize;
+                let p = self.tile_pixel(rect, l);
                 r[p * 3..p * 3 + 3].copy_from_slice(c);
             }
-            for (&k, (s, d)) in self.lists[i].iter().zip(sums) {
-                let g = self.splats[k as usize].index as usize;
-                for ch in 0..3 {
-                    out[g][ch] += s[ch];
-                }
-                if let Some(diag) = diag.as_deref_mut() {
-                    diag[g] += d;
-                }
-            }
+            self.add_tile_sums(i, sums, out, &mut diag);
         }
         r
     }
@@ -178,16 +193,8 @@ impl View {
                 sums
             })
             .collect();
-        for (list, sums) in self.lists.iter().zip(per_tile) {
-            for (&k, (s, d)) in list.iter().zip(sums) {
-                let i = self.splats[k as usize].index as usize;
-                for ch in 0..3 {
-                    out[i][ch] += s[ch];
-                }
-                if let Some(diag) = diag.as_deref_mut() {
-                    diag[i] += d;
-                }
-            }
+        for (i, sums) in per_tile.into_iter().enumerate() {
+            self.add_tile_sums(i, sums, out, &mut diag);
         }
     }
 }
@@ -438,18 +445,27 @@ mod tests {
         )
     }
 
+    /// Per-Gaussian colours and a 3-channel image of `v`'s size, varied, for the passes' tests.
+    fn test_colours(n: usize) -> Vec<[f32; 3]> {
+        (0..n)
+            .map(|i| [(i as f32).sin(), (i as f32 * 0.3).cos(), 0.5])
+            .collect()
+    }
+
+    fn test_image(v: &View) -> Vec<f32> {
+        (0..(v.width * v.height * 3) as usize)
+            .map(|k| ((k * 7919) % 101) as f32 / 100.0)
+            .collect()
+    }
+
     #[test]
     fn backward_is_the_adjoint_of_forward() {
         // <A x, r> = <x, A^T r> for any x and r: the solver's two passes walk the same
         // weights.
         let g = blob(150);
         let v = View::new(&g, &cams(&g, 1)[0]);
-        let x: Vec<[f32; 3]> = (0..g.len())
-            .map(|i| [(i as f32).sin(), (i as f32 * 0.3).cos(), 0.5])
-            .collect();
-        let r: Vec<f32> = (0..(v.width * v.height * 3) as usize)
-            .map(|k| ((k * 7919) % 101) as f32 / 100.0 - 0.5)
-            .collect();
+        let x = test_colours(g.len());
+        let r: Vec<f32> = test_image(&v).iter().map(|v| v - 0.5).collect();
         let ax = v.forward(&x);
         let lhs: f64 = ax
             .iter()
@@ -471,12 +487,8 @@ mod tests {
     fn the_fused_pass_gives_the_floats_of_forward_then_backward() {
         let g = blob(150);
         let v = View::new(&g, &cams(&g, 1)[0]);
-        let x: Vec<[f32; 3]> = (0..g.len())
-            .map(|i| [(i as f32).sin(), (i as f32 * 0.3).cos(), 0.5])
-            .collect();
-        let b: Vec<f32> = (0..(v.width * v.height * 3) as usize)
-            .map(|k| ((k * 7919) % 101) as f32 / 100.0)
-            .collect();
+        let x = test_colours(g.len());
+        let b = test_image(&v);
         let ax = v.forward(&x);
         let r: Vec<f32> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
         let (mut grad, mut diag) = (vec![[0.0f64; 3]; g.len()], vec![0.0f64; g.len()]);
