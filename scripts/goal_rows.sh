@@ -29,9 +29,12 @@
 # a single view's PSNR moves by several dB with any change of levels at these qualities, so 8 views are a small
 # sample. Every row holds SOG's PSNR on both the 8 and the 32 views (2026-11-26: the lod3, donut, plant and 273k
 # rows were re-chosen for that; BENCHMARKS.md "Where we are"). Each row then renders 2 x N more views at 1352x1014.
+# The wave row (2026-11-26) is the first frame of the real SOG sequence, read through the PLY splat-transform writes from it
+# (scripts/real_scenes.sh); its options are those `--target-psnr 60.5` printed with sh_dc one bit finer by hand.
 # Usage: bash scripts/goal_rows.sh  (~17 min, WIDE=0 ~5 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
-# target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh; and
-# target/peers-large-shuffled: DLGS_SCENES=$PWD/target/big_shuf.ply bash scripts/peers.sh target/peers-large-shuffled)
+# target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh;
+# target/peers-large-shuffled: DLGS_SCENES=$PWD/target/big_shuf.ply bash scripts/peers.sh target/peers-large-shuffled;
+# and target/peers-wave: DLGS_SCENES=sequence/playcanvas_wave_200f/wave_0001.sog bash scripts/peers.sh target/peers-wave)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${DLGS_DATA:-../shared/data}
@@ -39,6 +42,7 @@ OUT=${OUT:-target/goal_rows}
 mkdir -p "$OUT"
 cargo build --release -q -p dlgs-cli
 DLGS=target/release/dlgs
+source scripts/real_scenes.sh
 export RUST_BACKTRACE=0
 [ -f target/big.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- target/big.ply
 [ -f target/big_shuf.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- --shuffled-copy target/big_shuf.ply
@@ -82,6 +86,7 @@ row target/peers "$DATA/ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply" --no-meta 
 row target/peers "$DATA/ply/gsplat_DATA_new_22589_sh3.ply" --no-meta --bits position=11,log_scale=6,rotation=9,opacity=7,sh_dc=6,sh_rest=4,sh_high=4 --tiers 0.5,0.2 --shape 0.3 --refit-colours
 row target/peers "$DATA/ply/v3dg_donut_mipsplatting_45624_sh0.ply" --no-meta --quality high --bits rotation=8,sh_dc=9,position=15 --tiers 0.05 --coarse-rotations 2
 row target/peers "$DATA/splat/marcelpadilla_plant.splat" --no-meta --quality high --tiers 0.3,0.07
+row target/peers-wave "$(scene_path sequence/playcanvas_wave_200f/wave_0001.sog)" --no-meta --bits position=13,log_scale=5,rotation=1,opacity=8,sh_dc=7
 row target/peers-mosaic "$PWD/target/mosaic.ply" --no-meta --bits position=13,log_scale=7,rotation=9,opacity=7,sh_dc=8 --tiers 0.3,0.05 --coarse-rotations 1.25 --refit-colours
 row target/peers-large "$PWD/target/big.ply" --no-meta --bits position=15,log_scale=8,rotation=8,opacity=9,sh_dc=8 --tiers 0.15,0.015 --coarse-rotations 2
 # The same Gaussians with the second plant in another order: SPZ v4 codes the repeat of big.ply's

@@ -8,12 +8,31 @@ SCENES=(
   ply/gsplat_DATA_new_22589_sh3.ply
   ply/v3dg_donut_mipsplatting_45624_sh0.ply
   splat/marcelpadilla_plant.splat
+  sequence/playcanvas_wave_200f/wave_0001.sog
 )
 # DLGS_SCENES="a.ply b.splat": run on these instead (relative to $DATA, or absolute), e.g. the
 # larger scene built from the real ones (scripts/large_scene_rd.sh).
 if [ -n "${DLGS_SCENES:-}" ]; then read -r -a SCENES <<< "$DLGS_SCENES"; fi
-# scene_path S: the file of scene S.
-scene_path() { case "$1" in /*) echo "$1" ;; *) echo "$DATA/$1" ;; esac; }
+# scene_path S: the file of scene S. A SOG frame (the wave sequence, PlayCanvas SOG v2) is read
+# through its PLY, which `@playcanvas/splat-transform` writes once into target/sog_scenes/ (dlgs
+# reads PLY, .splat and SPZ): that PLY is the scene the comparisons start from.
+scene_path() {
+  case "$1" in
+    *.sog) sog_ply "$1" ;;
+    /*) echo "$1" ;;
+    *) echo "$DATA/$1" ;;
+  esac
+}
+sog_ply() {
+  local src out
+  src=$(case "$1" in /*) echo "$1" ;; *) echo "$DATA/$1" ;; esac)
+  out="target/sog_scenes/$(basename "${1%.sog}").ply"
+  if [ ! -f "$out" ]; then
+    mkdir -p target/sog_scenes
+    npx -y @playcanvas/splat-transform@2.7.1 -q -w "$src" "$out" >&2
+  fi
+  echo "$out"
+}
 # scene_count FILE: its Gaussians (a PLY's vertex count; a .splat is 32 bytes per Gaussian).
 scene_count() {
   case "$1" in

@@ -4,7 +4,9 @@
 //! not matter for scales). Picking, per Gaussian, the representative whose rotation is closest
 //! to the identity leaves every Gaussian exactly as it renders and shrinks the spread of the
 //! stored quaternions: on the real scenes the smallest-three rotation channels lose 2-4 bits per
-//! Gaussian of entropy (BENCHMARKS.md "Canonical compression").
+//! Gaussian of entropy (BENCHMARKS.md "Canonical compression"). A sphere (three equal scales)
+//! is the same ellipsoid under every rotation and is stored with the identity (gsplat's are a
+//! fifth of it, the wave sequence's Gaussians all; BENCHMARKS.md "Spheres").
 //!
 //! Only for Gaussians whose rotation and scales nothing else refers to: the static set of a
 //! scene without residual GOPs. Deformation decoders and residual fields add offsets to the
@@ -98,14 +100,21 @@ fn axis_maps() -> [[usize; 3]; 24] {
 
 /// The same Gaussians with each rotation replaced by its representative closest to the
 /// identity (largest `|w|` after normalising; the first group element on ties) and the
-/// log-scales permuted to match. Zero or non-finite quaternions are left as they are (the
-/// codec handles them on its own terms).
+/// log-scales permuted to match; a sphere (three equal log-scales) takes the identity itself.
+/// Zero or non-finite quaternions are left as they are (the codec handles them on its own
+/// terms).
 pub fn closest_to_identity(g: &Gaussians) -> Gaussians {
     let maps = axis_maps();
     let mut out = g.clone();
     for (q, s) in out.rotations.iter_mut().zip(out.log_scales.iter_mut()) {
         let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
         if !(n > 0.0 && n.is_finite()) {
+            continue;
+        }
+        // A sphere's covariance is `e^(2s) I` whatever its rotation: store none (the identity,
+        // which the rotation channels code for nearly nothing).
+        if s[0] == s[1] && s[1] == s[2] {
+            *q = [1.0, 0.0, 0.0, 0.0];
             continue;
         }
         let u = q.map(|v| v / n);
@@ -190,6 +199,13 @@ mod tests {
         g.log_scales.extend([[1.0, 2.0, 3.0]; 2]);
         g.opacity.extend([0.0; 2]);
         g.sh.extend([0.0; 6]);
+        for k in 0..10 {
+            g.positions.push([0.0; 3]);
+            g.rotations.push([rnd(), rnd(), rnd(), rnd()]);
+            g.log_scales.push([k as f32 - 5.0; 3]);
+            g.opacity.push(0.0);
+            g.sh.extend([0.0; 3]);
+        }
         let c = closest_to_identity(&g);
         let mut moved = 0;
         for i in 0..2000 {
@@ -210,6 +226,20 @@ mod tests {
             moved += (c.rotations[i] != g.rotations[i]) as usize;
         }
         assert!(moved > 1800, "{moved} of 2000 changed representative");
+        // Spheres (all of gsplat's 20.6 % and every Gaussian of the wave sequence) take the
+        // identity and keep their covariance.
+        for i in 2002..2012 {
+            let (a, b) = (
+                covariance(g.rotations[i], g.log_scales[i]),
+                covariance(c.rotations[i], c.log_scales[i]),
+            );
+            assert_eq!(c.rotations[i], [1.0, 0.0, 0.0, 0.0]);
+            assert_eq!(c.log_scales[i], g.log_scales[i]);
+            let scale = a.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
+            for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
+                assert!((x - y).abs() <= 1e-5 * scale, "sphere {i}: {a:?} vs {b:?}");
+            }
+        }
         assert_eq!(c.rotations[2000], [0.0; 4]);
         assert!(c.rotations[2001][0].is_nan());
         assert_eq!(c.log_scales[2001], [1.0, 2.0, 3.0]);

@@ -551,6 +551,42 @@ fn closest_to_identity_rotations_render_the_same_and_code_smaller() {
 }
 
 #[test]
+fn spheres_take_the_identity_rotation_and_code_smaller() {
+    // The real gsplat scene's spheres (three equal log-scales: 20.6 % of its Gaussians; every
+    // Gaussian of the wave sequence is one). A sphere renders the same whatever its rotation,
+    // so the encoder stores the identity.
+    let g = load("ply/gsplat_DATA_new_22589_sh3.ply");
+    let spheres: Vec<u32> = (0..g.len() as u32)
+        .filter(|&i| {
+            let s = g.log_scales[i as usize];
+            s[0] == s[1] && s[1] == s[2]
+        })
+        .collect();
+    assert!(spheres.len() > 4000, "{} spheres", spheres.len());
+    let g = permute(&g, &spheres);
+    assert!(closest_to_identity(&g)
+        .rotations
+        .iter()
+        .all(|q| *q == [1.0, 0.0, 0.0, 0.0]));
+    let (kept_bytes, kept) = encode_still(&g, false);
+    let (oriented_bytes, oriented) = encode_still(&g, true);
+    // Every rotation decodes to the identity's neighbour on the quantiser's levels (the
+    // rotation range [-1/sqrt 2, 1/sqrt 2] has no level at 0).
+    assert!(
+        oriented.rotations.iter().all(|q| q[0] > 0.9999),
+        "{:?}",
+        &oriented.rotations[..3]
+    );
+    let (pk, po) = (orbit_psnr(&g, &kept, 4), orbit_psnr(&g, &oriented, 4));
+    println!("kept {kept_bytes} B {pk:.2} dB, identity {oriented_bytes} B {po:.2} dB");
+    assert!(po > pk - 0.05, "{po:.2} vs {pk:.2} dB");
+    assert!(
+        (oriented_bytes as f64) < kept_bytes as f64 * 0.9,
+        "{oriented_bytes} vs {kept_bytes}"
+    );
+}
+
+#[test]
 fn bit_reallocation_buys_quality_within_the_presets_bytes() {
     // The real plant capture (.splat) stores 8-bit opacities: `medium`'s 7 opacity bits
     // merge them in pairs, so the allocator should move a bit there (measured: from rotation,
