@@ -17,19 +17,17 @@ if [ -n "${DLGS_SCENES:-}" ]; then read -r -a SCENES <<< "$DLGS_SCENES"; fi
 # through its PLY, which `@playcanvas/splat-transform` writes once into target/sog_scenes/ (dlgs
 # reads PLY, .splat and SPZ): that PLY is the scene the comparisons start from.
 scene_path() {
-  case "$1" in
-    *.sog) sog_ply "$1" ;;
-    /*) echo "$1" ;;
-    *) echo "$DATA/$1" ;;
-  esac
+  local path
+  case "$1" in /*) path=$1 ;; *) path=$DATA/$1 ;; esac
+  case "$path" in *.sog) sog_ply "$path" ;; *) echo "$path" ;; esac
 }
+# sog_ply FILE.sog: the PLY of a SOG file, written by splat-transform on first use.
 sog_ply() {
-  local src out
-  src=$(case "$1" in /*) echo "$1" ;; *) echo "$DATA/$1" ;; esac)
+  local out
   out="target/sog_scenes/$(basename "${1%.sog}").ply"
   if [ ! -f "$out" ]; then
     mkdir -p target/sog_scenes
-    npx -y @playcanvas/splat-transform@2.7.1 -q -w "$src" "$out" >&2
+    npx -y @playcanvas/splat-transform@2.7.1 -q -w "$1" "$out" >&2
   fi
   echo "$out"
 }
