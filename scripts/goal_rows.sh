@@ -29,8 +29,8 @@
 # a single view's PSNR moves by several dB with any change of levels at these qualities, so 8 views are a small
 # sample. Every row holds SOG's PSNR on both the 8 and the 32 views (2026-11-26: the lod3, donut, plant and 273k
 # rows were re-chosen for that; BENCHMARKS.md "Where we are"). Each row then renders 2 x N more views at 1352x1014.
-# The wave row (2026-11-26) is the first frame of the real SOG sequence, read through the PLY splat-transform writes from it
-# (scripts/real_scenes.sh); its options are those `--target-psnr 60.5` printed with sh_dc one bit finer by hand.
+# The wave row (2026-11-26) is the first frame of the real SOG sequence, which dlgs reads itself (bit for bit as
+# splat-transform decodes it); its options are those `--target-psnr 60.5` printed with sh_dc one bit finer by hand.
 # Usage: bash scripts/goal_rows.sh  (~17 min, WIDE=0 ~5 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh;
 # target/peers-large-shuffled: DLGS_SCENES=$PWD/target/big_shuf.ply bash scripts/peers.sh target/peers-large-shuffled;

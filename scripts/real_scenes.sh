@@ -13,28 +13,17 @@ SCENES=(
 # DLGS_SCENES="a.ply b.splat": run on these instead (relative to $DATA, or absolute), e.g. the
 # larger scene built from the real ones (scripts/large_scene_rd.sh).
 if [ -n "${DLGS_SCENES:-}" ]; then read -r -a SCENES <<< "$DLGS_SCENES"; fi
-# scene_path S: the file of scene S. A SOG frame (the wave sequence, PlayCanvas SOG v2) is read
-# through its PLY, which `@playcanvas/splat-transform` writes once into target/sog_scenes/ (dlgs
-# reads PLY, .splat and SPZ): that PLY is the scene the comparisons start from.
+# scene_path S: the file of scene S. dlgs reads the wave sequence's SOG frames itself (bit for bit
+# as splat-transform decodes them: tests/tests/interop.rs).
 scene_path() {
-  local path
-  case "$1" in /*) path=$1 ;; *) path=$DATA/$1 ;; esac
-  case "$path" in *.sog) sog_ply "$path" ;; *) echo "$path" ;; esac
+  case "$1" in /*) echo "$1" ;; *) echo "$DATA/$1" ;; esac
 }
-# sog_ply FILE.sog: the PLY of a SOG file, written by splat-transform on first use.
-sog_ply() {
-  local out
-  out="target/sog_scenes/$(basename "${1%.sog}").ply"
-  if [ ! -f "$out" ]; then
-    mkdir -p target/sog_scenes
-    npx -y @playcanvas/splat-transform@2.7.1 -q -w "$1" "$out" >&2
-  fi
-  echo "$out"
-}
-# scene_count FILE: its Gaussians (a PLY's vertex count; a .splat is 32 bytes per Gaussian).
+# scene_count FILE: its Gaussians (a PLY's vertex count; a .splat is 32 bytes per Gaussian; a
+# SOG's meta.json count).
 scene_count() {
   case "$1" in
     *.splat) echo $(( $(stat -c %s "$1") / 32 )) ;;
+    *.sog) python3 -c 'import json, sys, zipfile; print(json.loads(zipfile.ZipFile(sys.argv[1]).read("meta.json"))["count"])' "$1" ;;
     *) head -c 4096 "$1" | tr -d '\r' | awk '/^element vertex/ {print $3; exit}' ;;
   esac
 }

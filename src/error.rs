@@ -73,7 +73,7 @@ pub enum ErrorKind {
     /// A compressed stream failed to decompress or had the wrong size.
     #[error("decompression failed: {0}")]
     Decompress(String),
-    /// A foreign splat file (PLY, .splat, SPZ) is malformed.
+    /// A foreign splat file (PLY, .splat, SPZ, SOG) is malformed.
     #[error("{format}: {reason}")]
     Foreign {
         format: &'static str,

@@ -348,7 +348,7 @@ impl CodecArgs {
     pub fn config(&self, meta: serde_json::Value) -> Result<EncoderConfig> {
         if self.target_psnr.is_some() {
             bail!(
-                "--target-psnr searches the settings of a still scene (PLY, .splat, SPZ input); \
+                "--target-psnr searches the settings of a still scene (PLY, .splat, SPZ, SOG input); \
                  give --quality (and --bits, --tiers) for this input"
             );
         }

@@ -49,7 +49,7 @@ enum Cmd {
     },
     /// Read every chunk of a .dlgs file and check every CRC and index entry.
     Verify { file: PathBuf },
-    /// Encode a splat scene (PLY, .splat, SPZ) into a single-frame .dlgs, re-encode a .dlgs
+    /// Encode a splat scene (PLY, .splat, SPZ, PlayCanvas SOG) into a single-frame .dlgs, re-encode a .dlgs
     /// stream (e.g. a lossless `dlgs synth` model) with other settings, or re-pack a model
     /// trained with the DLGStream reference implementation: give its GOP output folders (each
     /// `gop<g>_<postfix>` or its `compression/best/jxl_quant`, in GOP order) or the scene
@@ -106,7 +106,7 @@ enum Cmd {
         #[arg(short, long)]
         output: PathBuf,
     },
-    /// Render a scene (.dlgs at time t, or PLY / .splat / SPZ) to PNG.
+    /// Render a scene (.dlgs at time t, or PLY / .splat / SPZ / SOG) to PNG.
     Render {
         scene: PathBuf,
         #[command(flatten)]

@@ -1,5 +1,5 @@
 //! Loading renderable Gaussians from any supported file: a `.dlgs` stream at time t (with the
-//! view-dependent decoders evaluated for a given camera) or a PLY / .splat / SPZ scene.
+//! view-dependent decoders evaluated for a given camera) or a PLY / .splat / SPZ / SOG scene.
 
 use std::fs::File;
 use std::io::BufReader;

@@ -15,7 +15,7 @@ use crate::pending_file::PendingFile;
 /// `dlgs synth`: a dynamic test model from a real scene.
 #[derive(Args, Debug, Clone)]
 pub struct SynthArgs {
-    /// Real canonical scene (PLY, .splat, SPZ).
+    /// Real canonical scene (PLY, .splat, SPZ, SOG).
     pub input: PathBuf,
     #[arg(short, long)]
     pub output: PathBuf,

@@ -1,6 +1,7 @@
 //! Readers and writers of the splat formats people already have (not part of `.dlgs`).
 
 pub mod ply;
+pub mod sog;
 pub mod splat;
 pub mod spz;
 pub mod spz_write;
@@ -9,8 +10,12 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;
 use crate::model::Gaussians;
 
-/// Read a PLY, `.splat` or SPZ file, chosen by extension (then by content).
+/// Read a PLY, `.splat`, SPZ or PlayCanvas SOG file (a `.sog` zip, or the `meta.json` of an
+/// unbundled SOG), chosen by extension (then by content).
 pub fn read_splat_file(path: &std::path::Path) -> Result<Gaussians> {
+    if path.file_name().and_then(|n| n.to_str()) == Some("meta.json") {
+        return sog::read_sog_dir(path, &Limits::default());
+    }
     let data = std::fs::read(path)
         .map_err(|e| Error::new(ErrorKind::Io(format!("{}: {e}", path.display())), 0))?;
     let ext = path
@@ -24,24 +29,13 @@ pub fn read_splat_file(path: &std::path::Path) -> Result<Gaussians> {
         "spz" => spz::read_spz(&data, &Limits::default()),
         _ if data.starts_with(b"ply") => ply::read_ply(&data),
         _ if data.starts_with(&[0x1f, 0x8b]) => spz::read_spz(&data, &Limits::default()),
-        // PlayCanvas SOG (a zip of WebP images): the format we compete with, not one we read.
-        "sog" => Err(Error::new(
-            ErrorKind::Foreign {
-                format: "splat",
-                reason: format!(
-                    "{}: PlayCanvas SOG is not read; convert it to PLY first, e.g. \
-                     `npx @playcanvas/splat-transform {} scene.ply`",
-                    path.display(),
-                    path.display()
-                ),
-            },
-            0,
-        )),
+        "sog" => sog::read_sog(&data, &Limits::default()),
+        _ if data.starts_with(b"PK\x03\x04") => sog::read_sog(&data, &Limits::default()),
         _ => Err(Error::new(
             ErrorKind::Foreign {
                 format: "splat",
                 reason: format!(
-                    "unknown file type (PLY, .splat or SPZ expected): {}",
+                    "unknown file type (PLY, .splat, SPZ or SOG expected): {}",
                     path.display()
                 ),
             },
@@ -68,11 +62,13 @@ mod tests {
     }
 
     #[test]
-    fn sog_and_unknown_files_are_told_apart_in_the_error() {
-        let sog = reason_for("frame.sog", b"PK\x03\x04 zip of WebP images");
-        assert!(sog.contains("PlayCanvas SOG is not read"), "{sog}");
-        assert!(sog.contains("splat-transform"), "{sog}");
+    fn a_broken_sog_and_an_unknown_file_say_what_they_are() {
+        let sog = reason_for("frame.sog", b"PK\x03\x04 not really a zip");
+        assert!(sog.contains("not a readable zip"), "{sog}");
         let unknown = reason_for("frame.xyz", b"not a splat");
-        assert!(unknown.contains("PLY, .splat or SPZ expected"), "{unknown}");
+        assert!(
+            unknown.contains("PLY, .splat, SPZ or SOG expected"),
+            "{unknown}"
+        );
     }
 }

@@ -37,6 +37,7 @@ pub const REAL_SCENES: &[(&str, usize, u8)] = &[
     ("ply/gsplat_DATA_new_22589_sh3.ply", 22589, 3),
     ("ply/v3dg_donut_mipsplatting_45624_sh0.ply", 45624, 0),
     ("splat/marcelpadilla_plant.splat", 113648, 0),
+    ("sequence/playcanvas_wave_200f/wave_0001.sog", 4225, 0),
 ];
 
 /// Give a real scene DLGStream's language channels: a language opacity equal to the colour

@@ -1,6 +1,6 @@
 //! Readers of real third-party splat files (../shared/data; nobody on this project wrote them).
 
-use dlgs::interop::{ply, splat, spz};
+use dlgs::interop::{ply, sog, splat, spz};
 use dlgs::Limits;
 use dlgs_tests::{data, load, REAL_SCENES};
 
@@ -161,4 +161,166 @@ fn spz_v4_from_splat_transform_matches_its_v3_and_the_source_ply() {
     let mut bad = good.clone();
     bad[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
     assert!(spz::read_spz(&bad, &Limits::default()).is_err());
+}
+
+/// The floats of `g` in the order `scripts/sog_golden.py` hashes them.
+fn model_floats(g: &dlgs::Gaussians) -> Vec<f32> {
+    let mut v: Vec<f32> = g.positions.iter().flatten().copied().collect();
+    v.extend(g.log_scales.iter().flatten());
+    v.extend(g.rotations.iter().flatten());
+    v.extend(&g.opacity);
+    v.extend(&g.sh);
+    v
+}
+
+#[test]
+fn sog_reads_bit_for_bit_as_splat_transform_decodes_it() {
+    use sha2::Digest;
+    let goldens: serde_json::Value = serde_json::from_slice(&fixture("sog_goldens.json")).unwrap();
+    let mut seen = 0;
+    for gold in goldens["files"].as_array().unwrap() {
+        let bytes = match gold["name"].as_str().unwrap() {
+            "wave_0001" => {
+                std::fs::read(data("sequence/playcanvas_wave_200f/wave_0001.sog")).unwrap()
+            }
+            "fruit_every8th_591" => fixture("fruit_every8th_591.sog"),
+            other => panic!("no file for golden {other}"),
+        };
+        let g = sog::read_sog(&bytes, &Limits::default()).unwrap();
+        let name = gold["name"].as_str().unwrap();
+        assert_eq!(g.len() as u64, gold["count"].as_u64().unwrap(), "{name}");
+        assert_eq!(
+            g.sh_degree as u64,
+            gold["sh_degree"].as_u64().unwrap(),
+            "{name}"
+        );
+        g.check_finite().unwrap();
+        // A few Gaussians value by value, so that a mismatch says where.
+        for (i, want) in gold["samples"].as_object().unwrap() {
+            let i: usize = i.parse().unwrap();
+            let got: [(&str, Vec<f32>); 5] = [
+                ("positions", g.positions[i].to_vec()),
+                ("log_scales", g.log_scales[i].to_vec()),
+                ("rotations", g.rotations[i].to_vec()),
+                ("opacity", vec![g.opacity[i]]),
+                (
+                    "sh",
+                    g.sh[i * g.sh_stride()..(i + 1) * g.sh_stride()].to_vec(),
+                ),
+            ];
+            for (key, values) in got {
+                let want: Vec<f32> = want[key]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap() as f32)
+                    .collect();
+                assert_eq!(values, want, "{name}: Gaussian {i}, {key}");
+            }
+        }
+        // Then every float.
+        let mut h = sha2::Sha256::new();
+        for f in model_floats(&g) {
+            h.update(f.to_le_bytes());
+        }
+        let digest: String = h.finalize().iter().map(|b| format!("{b:02x}")).collect();
+        assert_eq!(digest, gold["sha256_f32"].as_str().unwrap(), "{name}");
+        seen += 1;
+    }
+    assert_eq!(seen, 2);
+}
+
+#[test]
+fn an_unbundled_sog_reads_as_its_zip_does() {
+    let bytes = fixture("fruit_every8th_591.sog");
+    let bundled = sog::read_sog(&bytes, &Limits::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes)).unwrap();
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).unwrap();
+        let mut out = std::fs::File::create(dir.path().join(entry.name())).unwrap();
+        std::io::copy(&mut entry, &mut out).unwrap();
+    }
+    let unbundled = dlgs::interop::read_splat_file(&dir.path().join("meta.json")).unwrap();
+    assert!(unbundled == bundled);
+    // A texture missing beside meta.json is named in the error.
+    std::fs::remove_file(dir.path().join("quats.webp")).unwrap();
+    let e = dlgs::interop::read_splat_file(&dir.path().join("meta.json")).unwrap_err();
+    assert!(e.to_string().contains("quats.webp"), "{e}");
+}
+
+/// `fixture`'s SOG zip with `meta.json` passed through `edit` (stored entries, as SOG writes).
+fn sog_with_meta(edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
+    use std::io::{Read, Write};
+    let bytes = fixture("fruit_every8th_591.sog");
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes)).unwrap();
+    let mut out = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let stored =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).unwrap();
+        let mut content = Vec::new();
+        entry.read_to_end(&mut content).unwrap();
+        if entry.name() == "meta.json" {
+            let mut meta: serde_json::Value = serde_json::from_slice(&content).unwrap();
+            edit(&mut meta);
+            content = serde_json::to_vec(&meta).unwrap();
+        }
+        out.start_file(entry.name(), stored).unwrap();
+        out.write_all(&content).unwrap();
+    }
+    out.finish().unwrap().into_inner()
+}
+
+#[test]
+fn a_damaged_sog_is_refused_with_what_is_wrong() {
+    let reason = |edit: &dyn Fn(&mut serde_json::Value)| -> String {
+        match sog::read_sog(&sog_with_meta(edit), &Limits::default()) {
+            Ok(g) => format!("read {} Gaussians", g.len()),
+            Err(e) => e.to_string(),
+        }
+    };
+    // The rewritten zip itself reads as the original does.
+    let same = sog::read_sog(&sog_with_meta(|_| {}), &Limits::default()).unwrap();
+    assert!(same == sog::read_sog(&fixture("fruit_every8th_591.sog"), &Limits::default()).unwrap());
+    type MetaEdit<'a> = &'a dyn Fn(&mut serde_json::Value);
+    let cases: [(&str, MetaEdit); 7] = [
+        ("version 1", &|m| {
+            m.as_object_mut().unwrap().remove("version");
+        }),
+        ("version 3", &|m| m["version"] = 3.into()),
+        ("pixels for 99999 Gaussians", &|m| {
+            m["count"] = 99_999.into()
+        }),
+        ("past the palette", &|m| m["shN"]["count"] = 3.into()),
+        ("shN.bands is 4", &|m| m["shN"]["bands"] = 4.into()),
+        ("entries (1 to 256 expected)", &|m| {
+            m["scales"]["codebook"] = serde_json::json!([])
+        }),
+        ("nowhere.webp", &|m| {
+            m["quats"]["files"][0] = "nowhere.webp".into()
+        }),
+    ];
+    for (want, edit) in cases {
+        let got = reason(edit);
+        assert!(got.contains(want), "expected '{want}' in: {got}");
+    }
+    // A count past the limit is refused before any texture is decoded.
+    let huge = sog_with_meta(|m| m["count"] = (1u64 << 40).into());
+    let e = sog::read_sog(&huge, &Limits::tiny()).map(|g| g.len());
+    assert!(format!("{e:?}").contains("SOG Gaussian count"), "{e:?}");
+    // Truncated anywhere, the file fails cleanly.
+    let good = fixture("fruit_every8th_591.sog");
+    for cut in (0..good.len()).step_by(211) {
+        assert!(
+            sog::read_sog(&good[..cut], &Limits::default()).is_err(),
+            "cut {cut}"
+        );
+    }
+    // Bytes flipped inside the textures: an error or Gaussians, never a panic.
+    for at in (0..good.len()).step_by(509) {
+        let mut bad = good.clone();
+        bad[at] ^= 0x5a;
+        let _ = sog::read_sog(&bad, &Limits::tiny());
+    }
 }
