@@ -50,11 +50,26 @@ pub fn run_encode(
     codec: &CodecArgs,
     residual_mode: Option<&str>,
 ) -> Result<()> {
-    let in_size = std::fs::metadata(input)
-        .with_context(|| format!("reading {}", input.display()))?
-        .len();
+    let in_size = input_size(input).with_context(|| format!("reading {}", input.display()))?;
     let frames = encode_file(input, output, codec, residual_mode, true)?;
     report(input, in_size, output, frames)
+}
+
+/// Bytes of the input: for an unbundled SOG (`meta.json`), with the WebP textures beside it.
+fn input_size(input: &Path) -> std::io::Result<u64> {
+    let own = std::fs::metadata(input)?.len();
+    if input.file_name().and_then(|n| n.to_str()) != Some("meta.json") {
+        return Ok(own);
+    }
+    let dir = input.parent().unwrap_or(Path::new("."));
+    let mut total = own;
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.extension().and_then(|e| e.to_str()) == Some("webp") {
+            total += std::fs::metadata(&path)?.len();
+        }
+    }
+    Ok(total)
 }
 
 /// `--target-psnr`: the smallest candidate of [`dlgs_encoder::quality_search`] reaching

@@ -635,3 +635,55 @@ fn a_reader_that_goes_away_ends_the_output_quietly() {
     assert_eq!(out.status.code(), Some(141), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn a_real_sog_frame_encodes_and_compares_bundled_or_not() {
+    // The wave sequence's frames are PlayCanvas SOG v2 files nobody here wrote.
+    let tmp = tempfile::tempdir().unwrap();
+    let sog = dlgs_tests::data("sequence/playcanvas_wave_200f/wave_0001.sog");
+    let sog = sog.to_str().unwrap();
+    let path = |n: &str| tmp.path().join(n).to_str().unwrap().to_owned();
+    let out = dlgs(&[
+        "encode",
+        sog,
+        "-o",
+        &path("a.dlgs"),
+        "--quality",
+        "medium",
+        "--no-meta",
+    ]);
+    assert!(out.contains("% of input"), "{out}");
+    let cmp = dlgs(&["compare", sog, &path("a.dlgs"), "--json", "--orbit", "2"]);
+    let psnr = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+        .as_f64()
+        .unwrap();
+    assert!(psnr > 55.0, "{psnr} dB");
+    // The same frame unbundled (meta.json beside its textures) codes to the same file, and its
+    // size is reported against all of its files, as the zip's is.
+    let dir = tmp.path().join("unbundled");
+    std::fs::create_dir(&dir).unwrap();
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(sog).unwrap()).unwrap();
+    zip.extract(&dir).unwrap();
+    let meta = dir.join("meta.json");
+    let out_unbundled = dlgs(&[
+        "encode",
+        meta.to_str().unwrap(),
+        "-o",
+        &path("b.dlgs"),
+        "--quality",
+        "medium",
+        "--no-meta",
+    ]);
+    // (`--no-meta`: the META chunk would name the two source files.)
+    assert!(std::fs::read(path("a.dlgs")).unwrap() == std::fs::read(path("b.dlgs")).unwrap());
+    let percent = |s: &str| -> f64 {
+        let at = s.find("% of input").unwrap();
+        s[..at].rsplit('(').next().unwrap().parse().unwrap()
+    };
+    let (a, b) = (percent(&out), percent(&out_unbundled));
+    assert!((a - b).abs() < 2.0, "{a} % vs {b} %");
+    // A damaged SOG names what is wrong.
+    std::fs::write(path("bad.sog"), b"PK\x03\x04 not a zip").unwrap();
+    let err = dlgs_fails(&["encode", &path("bad.sog"), "-o", &path("c.dlgs")]);
+    assert!(err.contains("SOG: not a readable zip"), "{err}");
+}

@@ -21,6 +21,7 @@
 use std::io::Read;
 use std::path::Path;
 
+use rayon::prelude::*;
 use serde::Deserialize;
 
 use crate::error::{Error, ErrorKind, Result};
@@ -158,14 +159,17 @@ fn read_bounded(r: impl Read, name: &str, limits: &Limits) -> Result<Vec<u8>> {
 fn parse_meta(bytes: &[u8]) -> Result<Meta> {
     let value: serde_json::Value =
         serde_json::from_slice(bytes).map_err(|e| err(format!("meta.json: {e}")))?;
-    match value.get("version").and_then(|v| v.as_u64()) {
-        Some(2) => {}
+    if !value.is_object() {
+        return Err(err("meta.json is not a JSON object"));
+    }
+    match value.get("version") {
         None => {
             return Err(err(
                 "meta.json has no version: SOG version 1 is not read (re-save it with \
                  `npx @playcanvas/splat-transform IN.sog OUT.sog`)",
             ))
         }
+        Some(v) if v.as_u64() == Some(2) => {}
         Some(v) => {
             return Err(err(format!(
                 "meta.json: SOG version {v} is not read (2 is)"
@@ -209,11 +213,26 @@ fn decode(
         }
     }
 
-    let mut r = TextureReader { load, n, limits };
+    let t = fetch_textures(&meta, load, n, limits)?;
+    // Every byte that could break the layout is checked first, in Gaussian order (so the error
+    // names the first bad Gaussian on any thread count); the conversions below then run in
+    // parallel, each Gaussian on its own.
+    if let Some(i) = (0..n).find(|&i| t.quats.pixel(i)[3] < 252) {
+        return Err(err(format!(
+            "{}: Gaussian {i} has tag {} (252..=255 expected)",
+            meta.quats.files[0],
+            t.quats.pixel(i)[3]
+        )));
+    }
+    let scales_book = codebook(&meta.scales.codebook, "scales")?;
+    check_indices(&t.scales, n, scales_book.len(), "scales")?;
+    let dc_book = codebook(&meta.sh0.codebook, "sh0")?;
+    check_indices(&t.sh0, n, dc_book.len(), "sh0")?;
+
     let mut g = Gaussians::new(degree, 0);
-    let lo = r.texture(&meta.means.files, 0, "means")?;
-    let hi = r.texture(&meta.means.files, 1, "means")?;
+    let (lo, hi) = (&t.means_lo, &t.means_hi);
     g.positions = (0..n)
+        .into_par_iter()
         .map(|i| {
             let (l, h) = (lo.pixel(i), hi.pixel(i));
             std::array::from_fn(|a| {
@@ -226,78 +245,120 @@ fn decode(
             })
         })
         .collect();
-
-    let quats = r.texture(&meta.quats.files, 0, "quats")?;
     g.rotations = (0..n)
-        .map(|i| unpack_quat(quats.pixel(i), i, &meta.quats.files[0]))
-        .collect::<Result<_>>()?;
-
-    let scales_book = codebook(&meta.scales.codebook, "scales")?;
-    let scales = r.texture(&meta.scales.files, 0, "scales")?;
+        .into_par_iter()
+        .map(|i| unpack_quat(t.quats.pixel(i)))
+        .collect();
     g.log_scales = (0..n)
+        .into_par_iter()
         .map(|i| {
-            let p = scales.pixel(i);
-            let mut s = [0f32; 3];
-            for a in 0..3 {
-                s[a] = lookup(&scales_book, p[a], "scales", i)?;
-            }
-            Ok(s)
+            let p = t.scales.pixel(i);
+            [0, 1, 2].map(|a| scales_book[p[a] as usize])
         })
-        .collect::<Result<_>>()?;
-
-    let dc_book = codebook(&meta.sh0.codebook, "sh0")?;
-    let sh0 = r.texture(&meta.sh0.files, 0, "sh0")?;
-    g.opacity = Vec::with_capacity(n);
+        .collect();
+    g.opacity = (0..n)
+        .into_par_iter()
+        .map(|i| alpha_to_logit(t.sh0.pixel(i)[3]))
+        .collect();
     g.sh = vec![0.0; n * k * 3];
-    for i in 0..n {
-        let p = sh0.pixel(i);
+    g.sh.par_chunks_mut(k * 3).enumerate().for_each(|(i, sh)| {
+        let p = t.sh0.pixel(i);
         for c in 0..3 {
-            g.sh[i * k * 3 + c] = lookup(&dc_book, p[c], "sh0", i)?;
+            sh[c] = dc_book[p[c] as usize];
         }
-        g.opacity.push(alpha_to_logit(p[3]));
-    }
+    });
 
-    if let Some(sh_n) = &meta.sh_n {
-        read_sh_rest(&mut g, sh_n, &mut r)?;
+    if let (Some(sh_n), Some((centroids, labels))) = (&meta.sh_n, &t.sh_rest) {
+        read_sh_rest(&mut g, sh_n, centroids, labels)?;
     }
     Ok(g)
 }
 
-/// Loads the textures `meta.json` names, each checked against the Gaussian count.
-struct TextureReader<'a> {
-    load: &'a mut dyn FnMut(&str) -> Result<Vec<u8>>,
-    n: usize,
-    limits: &'a Limits,
+/// The textures a file's `meta.json` names.
+struct Textures {
+    means_lo: Texture,
+    means_hi: Texture,
+    quats: Texture,
+    scales: Texture,
+    sh0: Texture,
+    /// `shN`'s centroids and labels.
+    sh_rest: Option<(Texture, Texture)>,
 }
 
-impl TextureReader<'_> {
-    /// Texture `files[slot]`, with a pixel per Gaussian.
-    fn texture(&mut self, files: &[String], slot: usize, what: &str) -> Result<Texture> {
-        let n = self.n;
-        let name = files
+/// Fetch every texture, then decode them in parallel (each is independent, and each decodes
+/// to the same pixels on any thread count); the first failing one in `meta.json`'s order is
+/// the error reported. Each texture is refused before decoding if it has more pixels than the
+/// layout allows, so that a tiny file cannot make us decode a huge image.
+fn fetch_textures(
+    meta: &Meta,
+    load: &mut dyn FnMut(&str) -> Result<Vec<u8>>,
+    n: usize,
+    limits: &Limits,
+) -> Result<Textures> {
+    let name = |files: &[String], slot: usize, what: &str| -> Result<String> {
+        files
             .get(slot)
-            .ok_or_else(|| err(format!("{what}.files has no entry {slot}")))?;
-        // SOG's own layout pads each side to a multiple of 4; anything far larger is refused
-        // so that a tiny file cannot make us decode a huge image.
-        let t = self.sized(name, 4 * n as u64 + 65_536)?;
-        if t.width * t.height < n {
+            .cloned()
+            .ok_or_else(|| err(format!("{what}.files has no entry {slot}")))
+    };
+    // SOG's own layout pads each side of a per-Gaussian texture to a multiple of 4.
+    let per_gaussian = 4 * n as u64 + 65_536;
+    let mut jobs = vec![
+        (name(&meta.means.files, 0, "means")?, per_gaussian),
+        (name(&meta.means.files, 1, "means")?, per_gaussian),
+        (name(&meta.quats.files, 0, "quats")?, per_gaussian),
+        (name(&meta.scales.files, 0, "scales")?, per_gaussian),
+        (name(&meta.sh0.files, 0, "sh0")?, per_gaussian),
+    ];
+    if let Some(sh_n) = &meta.sh_n {
+        // 64 entries per row of `rest` pixels each: 16-bit labels address at most 1,024 rows
+        // (plus padding), 4 MB of RGBA at SH degree 3.
+        let rest = sh_coeffs(sh_n.bands.min(3)) as u64 - 1;
+        jobs.push((name(&sh_n.files, 0, "shN")?, 64 * rest * (1024 + 4)));
+        jobs.push((name(&sh_n.files, 1, "shN")?, per_gaussian));
+    }
+    let bytes = jobs
+        .iter()
+        .map(|(name, _)| load(name))
+        .collect::<Result<Vec<_>>>()?;
+    let decoded: Vec<Result<Texture>> = jobs
+        .par_iter()
+        .zip(bytes.par_iter())
+        .map(|((name, max_pixels), b)| decode_webp(b, name, *max_pixels, limits))
+        .collect();
+    let mut textures = Vec::with_capacity(decoded.len());
+    for (i, t) in decoded.into_iter().enumerate() {
+        let t = t?;
+        // Every texture but the centroids (slot 5) has a pixel per Gaussian.
+        if i != 5 && t.width * t.height < n {
             return Err(err(format!(
-                "{name}: {}x{} pixels for {n} Gaussians",
-                t.width, t.height
+                "{}: {}x{} pixels for {n} Gaussians",
+                jobs[i].0, t.width, t.height
             )));
         }
-        Ok(t)
+        textures.push(t);
     }
-
-    /// Texture `name`, refused before decoding if it has more than `max_pixels`.
-    fn sized(&mut self, name: &str, max_pixels: u64) -> Result<Texture> {
-        let bytes = (self.load)(name)?;
-        decode_webp(&bytes, name, max_pixels, self.limits)
-    }
+    let mut it = textures.into_iter();
+    let mut next = || it.next().expect("one texture per job");
+    let (means_lo, means_hi, quats, scales, sh0) = (next(), next(), next(), next(), next());
+    let sh_rest = meta.sh_n.as_ref().map(|_| (next(), next()));
+    Ok(Textures {
+        means_lo,
+        means_hi,
+        quats,
+        scales,
+        sh0,
+        sh_rest,
+    })
 }
 
 /// The SH coefficients above DC: each Gaussian's label picks a palette entry.
-fn read_sh_rest(g: &mut Gaussians, sh_n: &ShN, r: &mut TextureReader) -> Result<()> {
+fn read_sh_rest(
+    g: &mut Gaussians,
+    sh_n: &ShN,
+    centroids: &Texture,
+    labels: &Texture,
+) -> Result<()> {
     let n = g.len();
     let k = g.coeffs();
     let rest = k - 1;
@@ -309,14 +370,7 @@ fn read_sh_rest(g: &mut Gaussians, sh_n: &ShN, r: &mut TextureReader) -> Result<
             sh_n.count
         )));
     }
-    let centroids_name = sh_n
-        .files
-        .first()
-        .ok_or_else(|| err("shN.files has no centroids texture"))?;
-    // 64 entries per row of `rest` pixels each: 16-bit labels address at most 1,024 rows
-    // (plus padding), 4 MB of RGBA at SH degree 3.
-    let max_pixels = 64 * rest as u64 * (1024 + 4);
-    let centroids = r.sized(centroids_name, max_pixels)?;
+    let centroids_name = &sh_n.files[0];
     if centroids.width != 64 * rest {
         return Err(err(format!(
             "{centroids_name}: width {} where {} bands need {}",
@@ -331,24 +385,44 @@ fn read_sh_rest(g: &mut Gaussians, sh_n: &ShN, r: &mut TextureReader) -> Result<
             centroids.height, sh_n.count
         )));
     }
-    let labels = r.texture(&sh_n.files, 1, "shN")?;
-    for i in 0..n {
+    let label_of = |i: usize| {
         let p = labels.pixel(i);
-        let label = p[0] as usize | (p[1] as usize) << 8;
-        if label as u64 >= sh_n.count {
-            return Err(err(format!(
-                "{}: Gaussian {i} has label {label}, past the palette's {} entries",
-                sh_n.files[1], sh_n.count
-            )));
-        }
-        let (row, first) = (label / 64, (label % 64) * rest);
+        p[0] as usize | (p[1] as usize) << 8
+    };
+    if let Some(i) = (0..n).find(|&i| label_of(i) as u64 >= sh_n.count) {
+        return Err(err(format!(
+            "{}: Gaussian {i} has label {}, past the palette's {} entries",
+            sh_n.files[1],
+            label_of(i),
+            sh_n.count
+        )));
+    }
+    let pixel_of = |entry: usize, j: usize| {
+        centroids.pixel((entry / 64) * centroids.width + (entry % 64) * rest + j)
+    };
+    for entry in 0..sh_n.count as usize {
         for j in 0..rest {
-            let c = centroids.pixel(row * centroids.width + first + j);
-            for ch in 0..3 {
-                g.sh[i * k * 3 + (j + 1) * 3 + ch] = lookup(&book, c[ch], "shN", i)?;
+            if let Some(&b) = pixel_of(entry, j)[..3]
+                .iter()
+                .find(|&&b| b as usize >= book.len())
+            {
+                return Err(err(format!(
+                    "{centroids_name}: palette entry {entry} indexes entry {b} of a {}-entry \
+                     codebook",
+                    book.len()
+                )));
             }
         }
     }
+    g.sh.par_chunks_mut(k * 3).enumerate().for_each(|(i, sh)| {
+        let label = label_of(i);
+        for j in 0..rest {
+            let c = pixel_of(label, j);
+            for ch in 0..3 {
+                sh[(j + 1) * 3 + ch] = book[c[ch] as usize];
+            }
+        }
+    });
     Ok(())
 }
 
@@ -367,23 +441,23 @@ fn codebook(values: &[f64], what: &str) -> Result<Vec<f32>> {
     Ok(values.iter().map(|&v| v as f32).collect())
 }
 
-fn lookup(book: &[f32], index: u8, what: &str, gaussian: usize) -> Result<f32> {
-    book.get(index as usize).copied().ok_or_else(|| {
-        err(format!(
-            "{what}: Gaussian {gaussian} indexes entry {index} of a {}-entry codebook",
-            book.len()
-        ))
-    })
+/// `Foreign` at the first Gaussian whose RGB bytes of `texture` index past a codebook of
+/// `len` entries (only a codebook under 256 entries can be indexed past).
+fn check_indices(texture: &Texture, n: usize, len: usize, what: &str) -> Result<()> {
+    match (0..n).find_map(|i| {
+        let p = texture.pixel(i);
+        p[..3].iter().find(|&&b| b as usize >= len).map(|&b| (i, b))
+    }) {
+        Some((i, b)) => Err(err(format!(
+            "{what}: Gaussian {i} indexes entry {b} of a {len}-entry codebook"
+        ))),
+        None => Ok(()),
+    }
 }
 
-/// Smallest-three: alpha `252 + i` drops component `i`, which is rebuilt positive.
-fn unpack_quat(p: [u8; 4], gaussian: usize, texture: &str) -> Result<[f32; 4]> {
-    if p[3] < 252 {
-        return Err(err(format!(
-            "{texture}: Gaussian {gaussian} has tag {} (252..=255 expected)",
-            p[3]
-        )));
-    }
+/// Smallest-three: alpha `252 + i` (checked by the caller) drops component `i`, which is
+/// rebuilt positive.
+fn unpack_quat(p: [u8; 4]) -> [f32; 4] {
     let dropped = (p[3] - 252) as usize;
     let mut q = [0f64; 4];
     let mut rgb = p[..3].iter();
@@ -395,7 +469,7 @@ fn unpack_quat(p: [u8; 4], gaussian: usize, texture: &str) -> Result<[f32; 4]> {
     }
     let rest: f64 = q.iter().map(|v| v * v).sum();
     q[dropped] = (1.0 - rest).max(0.0).sqrt();
-    Ok(q.map(|v| v as f32))
+    q.map(|v| v as f32)
 }
 
 /// Opacity byte (after the sigmoid) to the stored logit; `a / 255` is kept within

@@ -284,7 +284,7 @@ fn a_damaged_sog_is_refused_with_what_is_wrong() {
     let same = sog::read_sog(&sog_with_meta(|_| {}), &Limits::default()).unwrap();
     assert!(same == sog::read_sog(&fixture("fruit_every8th_591.sog"), &Limits::default()).unwrap());
     type MetaEdit<'a> = &'a dyn Fn(&mut serde_json::Value);
-    let cases: [(&str, MetaEdit); 7] = [
+    let cases: [(&str, MetaEdit); 9] = [
         ("version 1", &|m| {
             m.as_object_mut().unwrap().remove("version");
         }),
@@ -299,6 +299,13 @@ fn a_damaged_sog_is_refused_with_what_is_wrong() {
         }),
         ("nowhere.webp", &|m| {
             m["quats"]["files"][0] = "nowhere.webp".into()
+        }),
+        // Codebooks cut short: the textures' bytes then index past their ends.
+        ("scales: Gaussian 0 indexes entry", &|m| {
+            m["scales"]["codebook"] = serde_json::json!([0.0])
+        }),
+        ("shN_centroids.webp: palette entry", &|m| {
+            m["shN"]["codebook"] = serde_json::json!([0.0])
         }),
     ];
     for (want, edit) in cases {
@@ -322,5 +329,21 @@ fn a_damaged_sog_is_refused_with_what_is_wrong() {
         let mut bad = good.clone();
         bad[at] ^= 0x5a;
         let _ = sog::read_sog(&bad, &Limits::tiny());
+    }
+}
+
+#[test]
+fn sog_reads_the_same_floats_on_any_thread_count() {
+    let bytes = fixture("fruit_every8th_591.sog");
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| sog::read_sog(&bytes, &Limits::default()).unwrap())
+    };
+    let one = on(1);
+    for threads in [2, 5] {
+        assert!(on(threads) == one, "{threads} threads");
     }
 }
