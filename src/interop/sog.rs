@@ -208,8 +208,14 @@ fn decode(
         ("means.mins", &meta.means.mins),
         ("means.maxs", &meta.means.maxs),
     ] {
-        if v.iter().any(|x| !x.is_finite()) {
-            return Err(err(format!("{what} is not finite")));
+        // Positions are `sign(v) (e^|v| - 1)`: past |v| ~ 88.7 that overflows f32.
+        if let Some(x) = v
+            .iter()
+            .find(|x| !((x.abs().exp() - 1.0) as f32).is_finite())
+        {
+            return Err(err(format!(
+                "{what} holds {x:e}, which decodes to a position past f32's range"
+            )));
         }
     }
 
@@ -433,9 +439,9 @@ fn codebook(values: &[f64], what: &str) -> Result<Vec<f32>> {
             values.len()
         )));
     }
-    if values.iter().any(|v| !v.is_finite()) {
+    if let Some(v) = values.iter().find(|v| !(**v as f32).is_finite()) {
         return Err(err(format!(
-            "{what}.codebook holds a value that is not finite"
+            "{what}.codebook holds {v:e}, past f32's range"
         )));
     }
     Ok(values.iter().map(|&v| v as f32).collect())

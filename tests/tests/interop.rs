@@ -284,7 +284,7 @@ fn a_damaged_sog_is_refused_with_what_is_wrong() {
     let same = sog::read_sog(&sog_with_meta(|_| {}), &Limits::default()).unwrap();
     assert!(same == sog::read_sog(&fixture("fruit_every8th_591.sog"), &Limits::default()).unwrap());
     type MetaEdit<'a> = &'a dyn Fn(&mut serde_json::Value);
-    let cases: [(&str, MetaEdit); 9] = [
+    let cases: [(&str, MetaEdit); 11] = [
         ("version 1", &|m| {
             m.as_object_mut().unwrap().remove("version");
         }),
@@ -306,6 +306,13 @@ fn a_damaged_sog_is_refused_with_what_is_wrong() {
         }),
         ("shN_centroids.webp: palette entry", &|m| {
             m["shN"]["codebook"] = serde_json::json!([0.0])
+        }),
+        // Numbers JSON holds but f32 cannot: refused, not decoded to infinities.
+        ("which decodes to a position past f32", &|m| {
+            m["means"]["maxs"][1] = 1e3.into()
+        }),
+        ("sh0.codebook holds 1e300", &|m| {
+            m["sh0"]["codebook"][7] = 1e300.into()
         }),
     ];
     for (want, edit) in cases {
