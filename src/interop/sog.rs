@@ -99,7 +99,10 @@ pub fn read_sog(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         .min_by_key(|n| n.len())
         .map(str::to_string)
         .ok_or_else(|| err("no meta.json in the zip"))?;
-    let dir = meta_name.trim_end_matches("meta.json").to_string();
+    let dir = meta_name
+        .strip_suffix("meta.json")
+        .unwrap_or("")
+        .to_string();
     let mut load = |name: &str| -> Result<Vec<u8>> {
         let full = format!("{dir}{name}");
         let index = zip
@@ -319,7 +322,7 @@ fn fetch_textures(
     if let Some(sh_n) = &meta.sh_n {
         // 64 entries per row of `rest` pixels each: 16-bit labels address at most 1,024 rows
         // (plus padding), 4 MB of RGBA at SH degree 3.
-        let rest = sh_coeffs(sh_n.bands.min(3)) as u64 - 1;
+        let rest = sh_coeffs(sh_n.bands) as u64 - 1; // bands: 1-3, checked by `decode`
         jobs.push((name(&sh_n.files, 0, "shN")?, 64 * rest * (1024 + 4)));
         jobs.push((name(&sh_n.files, 1, "shN")?, per_gaussian));
     }
