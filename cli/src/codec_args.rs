@@ -122,6 +122,17 @@ pub struct CodecArgs {
     /// also tried with the refit (at most 4, each with the cost above).
     #[arg(long)]
     pub refit_colours: bool,
+    /// With --refit-colours: before the colours, move each Gaussian's stored opacity along its
+    /// quantiser's levels so the decoded scene renders closer to the source from the same 36
+    /// views (a Gauss-Newton search, four sweeps, each view rendered 33 times), then fit the
+    /// colours to those opacities; judged like the colour refit (BENCHMARKS.md "Opacity
+    /// refit").
+    #[arg(long, requires = "refit_colours")]
+    pub refit_opacities: bool,
+    /// With --refit-colours: fit to the 36 views at 640x480 instead of 320x240: about 5x the
+    /// fit's time, 0.1-0.3 dB on the real scenes' goal rows (BENCHMARKS.md "Opacity refit").
+    #[arg(long, requires = "refit_colours")]
+    pub refit_full_size: bool,
     /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
     /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
     /// views of its own (not those of `dlgs compare`), gives the two closest below DB more
@@ -428,6 +439,8 @@ impl CodecArgs {
             importance: None,
             octree_positions: !self.grid_positions,
             refit_colours: self.refit_colours,
+            refit_opacities: self.refit_opacities,
+            refit_full_size: self.refit_full_size,
             rotation_coarsening: match self.coarse_rotations {
                 None if self.grid_positions => None,
                 None => Some(RotationCoarsening::DEFAULT),

@@ -13,6 +13,7 @@
 use dlgs::Gaussians;
 use dlgs_render::colour_fit::{fit_colour_offsets, snap_colour_offsets};
 use dlgs_render::metrics::psnr;
+use dlgs_render::opacity_fit::{snap_opacities, OpacityLattice};
 use dlgs_render::sh::C0;
 use dlgs_render::{orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
 use glam::Vec3;
@@ -25,10 +26,16 @@ const ITERATIONS: usize = 4;
 /// that covers a few pixels of the 320x240 views moves little.
 const DAMPING: f64 = 3.0;
 
-/// The views the fit matches: [`importance_views`] at half their size (320x240), 4x faster
-/// than full size.
-pub fn fit_views(g: &Gaussians) -> Vec<Camera> {
-    importance_views(g)
+/// The views the fit matches: [`importance_views`] (640x480) with `full_size`, else at half
+/// their size (320x240), 4x fewer pixels: on lod3's goal row the colour refit reaches 51.58 dB
+/// on the benchmark's views from full-size views, 51.31 from half-size ones, in 5x the time
+/// (BENCHMARKS.md "Opacity refit").
+pub fn fit_views(g: &Gaussians, full_size: bool) -> Vec<Camera> {
+    let views = importance_views(g);
+    if full_size {
+        return views;
+    }
+    views
         .iter()
         .map(|c| c.resized(c.width / 2, c.height / 2))
         .collect()
@@ -60,8 +67,8 @@ pub fn holdout_views(g: &Gaussians) -> Vec<Camera> {
 }
 
 /// The fit's views of `source` and its renders of them.
-fn fit_targets(source: &Gaussians) -> (Vec<Camera>, Vec<Vec<f32>>) {
-    let cams = fit_views(source);
+fn fit_targets(source: &Gaussians, full_size: bool) -> (Vec<Camera>, Vec<Vec<f32>>) {
+    let cams = fit_views(source, full_size);
     let opts = RenderOptions::default();
     let targets: Vec<Vec<f32>> = cams
         .iter()
@@ -84,6 +91,9 @@ pub struct Refits {
     pub offsets: Vec<[f32; 3]>,
     /// The same put on the quantiser's levels: steps moved per channel.
     pub on_levels: Vec<[i32; 3]>,
+    /// Opacity levels moved per Gaussian of `decoded` (all 0 without an opacity refit); both
+    /// colour fits were made with these opacities.
+    pub opacity_moves: Vec<i32>,
 }
 
 /// Colour changes that bring `decoded` closer to `source` over [`fit_views`]: the continuous
@@ -99,9 +109,28 @@ pub fn fit(
     decoded: &Gaussians,
     steps: &[[f32; 3]],
     moves: &[LevelMoves],
+    opacity: Option<&OpacityLevels>,
+    full_size: bool,
 ) -> Refits {
-    let (cams, targets) = fit_targets(source);
+    let (cams, targets) = fit_targets(source, full_size);
     let bg = RenderOptions::default().background;
+    let (opacity_moves, moved) = match opacity {
+        Some(levels) => {
+            let m = snap_opacities(
+                decoded,
+                &cams,
+                &targets,
+                bg,
+                &levels.lattice(),
+                OPACITY_SWEEPS,
+                OPACITY_DAMPING,
+            );
+            let moved = levels.apply(decoded, &m);
+            (m, Some(moved))
+        }
+        None => (vec![0; decoded.len()], None),
+    };
+    let decoded = moved.as_ref().unwrap_or(decoded);
     let offsets = fit_colour_offsets(decoded, &cams, &targets, bg, ITERATIONS, DAMPING);
     let on_levels = snap_colour_offsets(
         decoded,
@@ -114,7 +143,92 @@ pub fn fit(
         LATTICE_SWEEPS,
         DAMPING,
     );
-    Refits { offsets, on_levels }
+    Refits {
+        offsets,
+        on_levels,
+        opacity_moves,
+    }
+}
+
+/// Sweeps of the opacity search ([`snap_opacities`]).
+const OPACITY_SWEEPS: usize = 4;
+/// Its damping, in squared colour per squared alpha change.
+const OPACITY_DAMPING: f64 = 1.0;
+
+/// Where each decoded Gaussian's opacity may move: its part's opacity quantiser has the fixed
+/// range [0, 1] in alpha with `2^bits - 1` steps; a Gaussian on level 0 or the top level
+/// stays (the decoder clamps those half a step inside (0, 1)), the others may move to any
+/// level from 1 to `top - 1`.
+pub struct OpacityLevels {
+    /// Per decoded Gaussian: its level, its part's top level.
+    levels: Vec<(i32, i32)>,
+    steps: Vec<f32>,
+    moves: Vec<(i32, i32)>,
+}
+
+impl OpacityLevels {
+    pub fn of(
+        parts: &[(Gaussians, dlgs::payload::sorted_grid::QuantBits)],
+        decoded: &Gaussians,
+        stored: &[u32],
+        place: &[(usize, usize)],
+    ) -> OpacityLevels {
+        let mut out = OpacityLevels {
+            levels: Vec::with_capacity(stored.len()),
+            steps: Vec::with_capacity(stored.len()),
+            moves: Vec::with_capacity(stored.len()),
+        };
+        for (k, &j) in stored.iter().enumerate() {
+            let top = (1i32 << parts[place[j as usize].0].1.opacity) - 1;
+            let alpha = dlgs::model::sigmoid(decoded.opacity[k]);
+            let level = (alpha * top as f32).round() as i32;
+            out.levels.push((level, top));
+            if level >= 1 && level < top {
+                out.steps.push(1.0 / top as f32);
+                out.moves.push((1 - level, top - 1 - level));
+            } else {
+                out.steps.push(0.0);
+                out.moves.push((0, 0));
+            }
+        }
+        out
+    }
+
+    fn lattice(&self) -> OpacityLattice<'_> {
+        OpacityLattice {
+            steps: &self.steps,
+            moves: &self.moves,
+        }
+    }
+
+    /// `decoded` with each Gaussian's opacity moved by `m` levels.
+    fn apply(&self, decoded: &Gaussians, m: &[i32]) -> Gaussians {
+        let mut g = decoded.clone();
+        for (k, &mk) in m.iter().enumerate() {
+            if mk != 0 {
+                g.opacity[k] = logit(self.alpha(k, mk));
+            }
+        }
+        g
+    }
+
+    fn alpha(&self, k: usize, m: i32) -> f32 {
+        let (level, top) = self.levels[k];
+        (level + m) as f32 / top as f32
+    }
+
+    /// Sets Gaussian `i` of a part (`g`) to decoded Gaussian `k`'s opacity level moved by `m`
+    /// (unchanged for `m == 0`: its own value lands on the same level).
+    pub fn set(&self, g: &mut Gaussians, i: usize, k: usize, m: i32) {
+        if m != 0 {
+            g.opacity[i] = logit(self.alpha(k, m));
+        }
+    }
+}
+
+/// Pre-sigmoid opacity of an alpha strictly inside (0, 1).
+fn logit(a: f32) -> f32 {
+    (a / (1.0 - a)).ln()
 }
 
 /// Sets the SH DC coefficients of Gaussian `i` of `g` to those of Gaussian `k` of `decoded`

@@ -56,8 +56,21 @@ fn tile_weights(splats: &[Splat2d], list: &[u32], x0: u32, y0: u32, w: u32, h: u
 pub fn for_each_weight(
     splats: &[Splat2d],
     list: &[u32],
-    (x0, y0, w, h): (u32, u32, u32, u32),
+    rect: (u32, u32, u32, u32),
     mut visit: impl FnMut(usize, u32, u32, f32),
+) {
+    for_each_blend(splats, list, rect, |slot, x, y, a, t| {
+        visit(slot, x, y, a * t)
+    });
+}
+
+/// [`for_each_weight`] with the weight's two factors: `visit(slot, x, y, alpha a,
+/// transmittance T before this splat)`.
+pub fn for_each_blend(
+    splats: &[Splat2d],
+    list: &[u32],
+    (x0, y0, w, h): (u32, u32, u32, u32),
+    mut visit: impl FnMut(usize, u32, u32, f32, f32),
 ) {
     let mut t = vec![1.0f32; (w * h) as usize];
     // Pixels finished so far: once all are, no later splat adds to the tile (the raster's
@@ -97,7 +110,7 @@ pub fn for_each_weight(
                     row_finished[(y - y0) as usize] += 1;
                     continue;
                 }
-                visit(slot, x, y, a * t[p]);
+                visit(slot, x, y, a, t[p]);
                 t[p] = next;
             }
         }

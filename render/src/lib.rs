@@ -12,6 +12,7 @@ pub mod contribution;
 pub mod fastexp;
 pub mod image_out;
 pub mod metrics;
+pub mod opacity_fit;
 pub mod project;
 pub mod raster;
 pub mod sh;
