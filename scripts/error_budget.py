@@ -6,8 +6,9 @@ Usage: python3 scripts/error_budget.py SOURCE.ply CODED.dlgs [--views 8]
 
 Decodes CODED.dlgs to a PLY, matches every decoded Gaussian to its source Gaussian (nearest
 position: the positions moved by under half a quantiser step), and writes hybrids: the decoded
-scene with one attribute group put back to the source's values ("all but X exact": the error
-of X alone), and the source with the decoded values of one group ("only X quantised"). Scale
+scene with one attribute group put back to the source's values ("all but X quantised"), and with
+every group but one put back ("only X quantised": the error of X alone). The groups are position,
+shape, opacity and SH DC; SH bands above the DC stay as decoded in both. Scale
 and rotation are one group (shape): the encoder may write a Gaussian's axes in another order
 (`encoder/src/orientation.rs`), so one without the other is not the same ellipsoid. Prints the
 PSNR of each over `dlgs compare`'s orbit views. Without a refit the "only X" errors add up to

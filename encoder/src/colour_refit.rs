@@ -13,7 +13,7 @@
 use dlgs::Gaussians;
 use dlgs_render::colour_fit::{fit_colour_offsets, snap_colour_offsets};
 use dlgs_render::metrics::psnr;
-use dlgs_render::opacity_fit::{snap_opacities, OpacityLattice};
+use dlgs_render::opacity_fit::{logit, snap_opacities, OpacityLattice};
 use dlgs_render::sh::C0;
 use dlgs_render::{orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
 use glam::Vec3;
@@ -224,11 +224,6 @@ impl OpacityLevels {
             g.opacity[i] = logit(self.alpha(k, m));
         }
     }
-}
-
-/// Pre-sigmoid opacity of an alpha strictly inside (0, 1).
-fn logit(a: f32) -> f32 {
-    (a / (1.0 - a)).ln()
 }
 
 /// Sets the SH DC coefficients of Gaussian `i` of `g` to those of Gaussian `k` of `decoded`

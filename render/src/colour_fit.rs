@@ -16,8 +16,8 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::contribution::for_each_weight;
-use crate::project::{project_all, Splat2d, TILE};
-use crate::raster::bin_tiles;
+use crate::project::{project_all, Splat2d};
+use crate::raster::{bin_tiles, tile_rect};
 use dlgs::Gaussians;
 
 /// One view's projected Gaussians and tile lists, computed once (the geometry does not move).
@@ -41,15 +41,7 @@ impl View {
     }
 
     fn tile_rect(&self, i: usize) -> (u32, u32, u32, u32) {
-        let tiles_x = self.width.div_ceil(TILE) as usize;
-        let x0 = (i % tiles_x) as u32 * TILE;
-        let y0 = (i / tiles_x) as u32 * TILE;
-        (
-            x0,
-            y0,
-            (self.width - x0).min(TILE),
-            (self.height - y0).min(TILE),
-        )
+        tile_rect(self.width, self.height, i)
     }
 
     /// The image pixel of pixel `l` (row-major) of the tile at `rect` ([`Self::tile_rect`]).

@@ -10,8 +10,8 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::fastexp::exp_neg;
-use crate::project::{project_all, Splat2d, ALPHA_MIN, TILE};
-use crate::raster::{bin_tiles, ALPHA_MAX, T_MIN};
+use crate::project::{project_all, Splat2d, ALPHA_MIN};
+use crate::raster::{bin_tiles, tile_rect, ALPHA_MAX, T_MIN};
 use dlgs::Gaussians;
 
 /// Per Gaussian, its blending weight summed over every pixel of every view (in pixels).
@@ -19,16 +19,12 @@ pub fn contributions(g: &Gaussians, cams: &[Camera]) -> Vec<f64> {
     let mut total = vec![0.0f64; g.len()];
     for cam in cams {
         let splats = project_all(g, cam, false);
-        let tiles_x = cam.width.div_ceil(TILE) as usize;
         let lists = bin_tiles(&splats, cam.width, cam.height);
         let per_tile: Vec<Vec<f64>> = lists
             .par_iter()
             .enumerate()
             .map(|(i, list)| {
-                let x0 = (i % tiles_x) as u32 * TILE;
-                let y0 = (i / tiles_x) as u32 * TILE;
-                let w = (cam.width - x0).min(TILE);
-                let h = (cam.height - y0).min(TILE);
+                let (x0, y0, w, h) = tile_rect(cam.width, cam.height, i);
                 tile_weights(&splats, list, x0, y0, w, h)
             })
             .collect();

@@ -19,8 +19,8 @@ use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::colour_fit::LATTICE_GROUPS;
 use crate::contribution::for_each_blend;
-use crate::project::{project_all, TILE};
-use crate::raster::{bin_tiles, rasterize, ALPHA_MAX};
+use crate::project::project_all;
+use crate::raster::{bin_tiles, rasterize, tile_rect, ALPHA_MAX};
 use dlgs::Gaussians;
 
 /// Per Gaussian, where its opacity may go: alpha `start + m * step` for whole `m` in
@@ -92,7 +92,7 @@ pub fn snap_opacities(
 }
 
 /// Pre-sigmoid opacity of alpha `a` (kept inside (0, 1)).
-fn logit(a: f32) -> f32 {
+pub fn logit(a: f32) -> f32 {
     let a = a.clamp(1e-6, 1.0 - 1e-6);
     (a / (1.0 - a)).ln()
 }
@@ -116,15 +116,11 @@ fn view_gradient(
         .zip(target)
         .map(|(c, t)| ((t - c) as f64).powi(2))
         .sum();
-    let tiles_x = width.div_ceil(TILE) as usize;
     let per_tile: Vec<Vec<(f64, f64)>> = lists
         .par_iter()
         .enumerate()
         .map(|(i, list)| {
-            let x0 = (i % tiles_x) as u32 * TILE;
-            let y0 = (i / tiles_x) as u32 * TILE;
-            let w = (width - x0).min(TILE);
-            let h = (height - y0).min(TILE);
+            let (x0, y0, w, h) = tile_rect(width, height, i);
             // What the splats in front of (and including) the current one added, per pixel.
             let mut front = vec![[0.0f32; 3]; (w * h) as usize];
             let mut sums = vec![(0.0f64, 0.0f64); list.len()];

@@ -91,6 +91,15 @@ pub fn rasterize(
     acc
 }
 
+/// Pixel rectangle `(x0, y0, w, h)` of tile `i` (row-major, [`bin_tiles`]'s order) of a
+/// `width` x `height` image.
+pub fn tile_rect(width: u32, height: u32, i: usize) -> (u32, u32, u32, u32) {
+    let tiles_x = width.div_ceil(TILE) as usize;
+    let x0 = (i % tiles_x) as u32 * TILE;
+    let y0 = (i / tiles_x) as u32 * TILE;
+    (x0, y0, (width - x0).min(TILE), (height - y0).min(TILE))
+}
+
 /// Per tile (row-major), the splats that reach it, in (depth, index) order.
 pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
     let tiles_x = width.div_ceil(TILE) as usize;
