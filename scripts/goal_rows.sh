@@ -19,7 +19,8 @@
 # The plant's first tier fraction went from 0.3 to 0.35 when its SH DC levels moved onto its 8-bit colours (2026-11-25,
 # BENCHMARKS.md "Colour lattice"), and back to 0.3 on 2026-11-26, where 0.35 fell 0.02 dB under SOG on 32 views; the
 # donut's row took 15-bit positions and --tiers 0.05, the 273k rows --tiers 0.15,0.015, lod3's --tiers 0.7,0.3 (the
-# same day, BENCHMARKS.md "Where we are").
+# same day, BENCHMARKS.md "Where we are"); lod3's took --tiers 0.8,0.4 with --refit-opacities --refit-full-size on
+# 2026-11-27 (18,870 B; about 3 min of encoding).
 # TARGET=1: instead of those options, each scene is coded with `--target-psnr <SOG's PSNR on the
 # benchmark views>`: the encoder's own search, on views of its own (BENCHMARKS.md "Target PSNR").
 # EXTRA="OPTIONS": appended to every row's options (e.g. EXTRA=--fast-decode OUT=target/goal_rows_fast:
@@ -31,7 +32,7 @@
 # rows were re-chosen for that; BENCHMARKS.md "Where we are"). Each row then renders 2 x N more views at 1352x1014.
 # The wave row (2026-11-26) is the first frame of the real SOG sequence, which dlgs reads itself (bit for bit as
 # splat-transform decodes it); its options are those `--target-psnr 60.5` printed with sh_dc one bit finer by hand.
-# Usage: bash scripts/goal_rows.sh  (~17 min, WIDE=0 ~5 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
+# Usage: bash scripts/goal_rows.sh  (~20 min, WIDE=0 ~8 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh;
 # target/peers-large-shuffled: DLGS_SCENES=$PWD/target/big_shuf.ply bash scripts/peers.sh target/peers-large-shuffled;
 # and target/peers-wave: DLGS_SCENES=sequence/playcanvas_wave_200f/wave_0001.sog bash scripts/peers.sh target/peers-wave)
@@ -79,7 +80,7 @@ row() { # peers_dir scene_file options...
     "$(echo "100 * $b / $sog" | bc -l)" "$(echo "100 * $b / $spz" | bc -l)" "$p" "$sp" "$s" "$ss" \
     "$(echo "$end - $start" | bc)" "$wide"
 }
-row target/peers "$DATA/ply/gs3d-fork_lod3_tile_0_1971_sh3.ply" --no-meta --bits position=13,log_scale=9,rotation=9,opacity=8,sh_dc=8 --tiers 0.7,0.3 --coarse-rotations 2 --refit-colours
+row target/peers "$DATA/ply/gs3d-fork_lod3_tile_0_1971_sh3.ply" --no-meta --bits position=13,log_scale=9,rotation=9,opacity=8,sh_dc=8 --tiers 0.8,0.4 --coarse-rotations 2 --refit-colours --refit-opacities --refit-full-size
 row target/peers "$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply" --no-meta --bits position=11,log_scale=7,rotation=7,opacity=8,sh_dc=7,sh_rest=4,sh_high=5 --tiers 0.15,0.02 --shape 0.15 --refit-colours
 row target/peers "$DATA/ply/gs3d-fork_lod2_tile_0_6831_sh3.ply" --no-meta --bits position=13,log_scale=8,rotation=9,opacity=7,sh_dc=8 --tiers 0.5,0.185 --coarse-rotations 3 --refit-colours
 row target/peers "$DATA/ply/gs3d-fork_lod1_tile_0_0.5x_14051_sh3.ply" --no-meta --bits position=13,log_scale=8,rotation=10,opacity=7,sh_dc=7 --tiers 0.3,0.05 --coarse-rotations 1.7 --refit-colours

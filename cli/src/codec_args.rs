@@ -125,8 +125,8 @@ pub struct CodecArgs {
     /// With --refit-colours: before the colours, move each Gaussian's stored opacity along its
     /// quantiser's levels so the decoded scene renders closer to the source from the same 36
     /// views (a Gauss-Newton search, four sweeps, each view rendered 33 times), then fit the
-    /// colours to those opacities; judged like the colour refit (BENCHMARKS.md "Opacity
-    /// refit").
+    /// colours to those opacities. The judge weighs this refit and the colours refit alone and
+    /// stores the best, if it beats the first coding (BENCHMARKS.md "Opacity refit").
     #[arg(long, requires = "refit_colours")]
     pub refit_opacities: bool,
     /// With --refit-colours: fit to the 36 views at 640x480 instead of 320x240: about 5x the

@@ -268,12 +268,17 @@ pub fn encode_file(
             }
             if let Some(r) = report.refit {
                 println!(
-                    "  colour refit {} ({}): {:.2} -> {:.2} dB on the encoder's held-out views",
+                    "  colour refit {} ({}{}): {:.2} -> {:.2} dB on the encoder's held-out views",
                     if r.kept { "stored" } else { "not stored" },
                     if r.on_levels {
                         "on the quantiser's levels"
                     } else {
                         "offsets rounded by the coder"
+                    },
+                    if r.opacities_moved {
+                        ", opacities moved"
+                    } else {
+                        ""
                     },
                     r.before_db,
                     r.after_db

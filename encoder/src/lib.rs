@@ -214,7 +214,8 @@ pub struct EncoderConfig {
     pub refit_colours: bool,
     /// With [`Self::refit_colours`]: first move the stored opacities along their quantiser's
     /// levels so the decoded scene renders closer to the source
-    /// ([`dlgs_render::opacity_fit`]), then fit the colours to that. Judged the same way.
+    /// ([`dlgs_render::opacity_fit`]), then fit the colours to that. The judge sees this refit
+    /// and the colours refit alone, and stores the one that renders closest.
     pub refit_opacities: bool,
     /// With [`Self::refit_colours`]: fit to views of 640x480 instead of 320x240
     /// ([`colour_refit::fit_views`]): about 5x the fit's time for 0.1-0.3 dB.
@@ -275,7 +276,8 @@ pub struct StreamEncoder<W: Write> {
 }
 
 /// The colour refit's judgement ([`EncoderConfig::refit_colours`]): mean PSNR against the
-/// source over [`colour_refit::holdout_views`], without and with the better of the two refits.
+/// source over [`colour_refit::holdout_views`], without and with the best refit (colours alone or,
+/// with [`EncoderConfig::refit_opacities`], opacities and colours; each as offsets or on levels).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RefitReport {
     pub before_db: f64,
@@ -285,6 +287,45 @@ pub struct RefitReport {
     /// Whether the better refit (`after_db`) was the one on the quantiser's levels, not the
     /// continuous offsets rounded by the coder.
     pub on_levels: bool,
+    /// Whether the better refit moved opacities too ([`EncoderConfig::refit_opacities`]),
+    /// not the colours alone.
+    pub opacities_moved: bool,
+}
+
+/// One refit candidate: a fit's colours as continuous offsets or on the quantiser's levels,
+/// with its opacity moves when the fit made them.
+struct RefitChoice<'a> {
+    fit: &'a colour_refit::Refits,
+    opacity: Option<&'a colour_refit::OpacityLevels>,
+    on_levels: bool,
+}
+
+impl RefitChoice<'_> {
+    /// `parts` with this candidate's colours (and opacities) on the Gaussians `decoded` holds
+    /// (`stored[k]`: Gaussian `k`'s index in the parts' concatenation, `place`: its part and
+    /// index there).
+    fn apply(
+        &self,
+        parts: &[(dlgs::Gaussians, QuantBits)],
+        decoded: &dlgs::Gaussians,
+        stored: &[u32],
+        place: &[(usize, usize)],
+        lattice: &colour_refit::DcLattice,
+    ) -> Vec<(dlgs::Gaussians, QuantBits)> {
+        let mut refit = parts.to_vec();
+        for (k, &j) in stored.iter().enumerate() {
+            let (p, i) = place[j as usize];
+            if self.on_levels {
+                lattice.set_dc(&mut refit[p].0, i, p, decoded, k, self.fit.on_levels[k]);
+            } else {
+                colour_refit::set_refit_dc(&mut refit[p].0, i, decoded, k, self.fit.offsets[k]);
+            }
+            if let Some(levels) = self.opacity {
+                levels.set(&mut refit[p].0, i, k, self.fit.opacity_moves[k]);
+            }
+        }
+        refit
+    }
 }
 
 impl<W: Write> StreamEncoder<W> {
@@ -580,58 +621,67 @@ impl<W: Write> StreamEncoder<W> {
         for (p, (g, _)) in parts.iter().enumerate() {
             place.extend((0..g.len()).map(|i| (p, i)));
         }
-        let mut refit: Vec<(dlgs::Gaussians, QuantBits)> = parts.to_vec();
         let lattice = colour_refit::DcLattice::of_parts(parts);
         let (steps, moves) = lattice.steps_and_moves(&decoded, stored, &place);
         let opacity = self
             .cfg
             .refit_opacities
             .then(|| colour_refit::OpacityLevels::of(parts, &decoded, stored, &place));
-        let fits = colour_refit::fit(
-            source,
-            &decoded,
-            &steps,
-            &moves,
-            opacity.as_ref(),
-            self.cfg.refit_full_size,
-        );
-        let mut with_offsets: Vec<(dlgs::Gaussians, QuantBits)> = parts.to_vec();
-        for (k, (&j, &off)) in stored.iter().zip(&fits.offsets).enumerate() {
-            let (p, i) = place[j as usize];
-            colour_refit::set_refit_dc(&mut with_offsets[p].0, i, &decoded, k, off);
-        }
-        for (k, (&j, m)) in stored.iter().zip(&fits.on_levels).enumerate() {
-            let (p, i) = place[j as usize];
-            lattice.set_dc(&mut refit[p].0, i, p, &decoded, k, *m);
-        }
+        // The colours alone, then (when asked) the opacities and colours: the opacity search
+        // can render worse on unseen views than the colours alone (gsplat's goal row), so the
+        // judge sees both.
+        let mut fits = vec![(
+            colour_refit::fit(
+                source,
+                &decoded,
+                &steps,
+                &moves,
+                None,
+                self.cfg.refit_full_size,
+            ),
+            None,
+        )];
         if let Some(levels) = &opacity {
-            for (k, (&j, &m)) in stored.iter().zip(&fits.opacity_moves).enumerate() {
-                let (p, i) = place[j as usize];
-                levels.set(&mut with_offsets[p].0, i, k, m);
-                levels.set(&mut refit[p].0, i, k, m);
+            let with_opacity = colour_refit::fit(
+                source,
+                &decoded,
+                &steps,
+                &moves,
+                Some(levels),
+                self.cfg.refit_full_size,
+            );
+            fits.push((with_opacity, Some(levels)));
+        }
+        // Each fit as continuous offsets rounded by the coder, then on the quantiser's levels.
+        let mut codings = Vec::with_capacity(2 * fits.len());
+        let mut redecoded = Vec::with_capacity(2 * fits.len());
+        for (fit, levels) in &fits {
+            for on_levels in [false, true] {
+                let refit = RefitChoice {
+                    fit,
+                    opacity: *levels,
+                    on_levels,
+                };
+                let coding = code(&refit.apply(parts, &decoded, stored, &place, &lattice))?;
+                redecoded.push(sorted_grid::decode(&coding.0, 0, scene, &limits)?.statics);
+                codings.push(coding);
             }
         }
-        let codings = [code(&with_offsets)?, code(&refit)?];
-        let mut redecoded = Vec::with_capacity(2);
-        for (payload, _) in &codings {
-            redecoded.push(sorted_grid::decode(payload, 0, scene, &limits)?.statics);
-        }
-        let scores = colour_refit::holdout_psnr(source, &[&decoded, &redecoded[0], &redecoded[1]]);
-        // The better refit, the levels' on a tie; stored only if it beats the first coding.
-        let best = if scores[1] > scores[2] { 1 } else { 2 };
+        let mut candidates = vec![&decoded];
+        candidates.extend(redecoded.iter());
+        let scores = colour_refit::holdout_psnr(source, &candidates);
+        // The best refit, the later one on a tie (levels before offsets, opacities and colours
+        // before colours alone); stored only if it beats the first coding.
+        let best = (2..scores.len()).fold(1, |b, c| if scores[c] >= scores[b] { c } else { b });
         let kept = scores[best] > scores[0];
         self.refit = Some(RefitReport {
             before_db: scores[0],
             after_db: scores[best],
             kept,
-            on_levels: best == 2,
+            on_levels: (best - 1) % 2 == 1,
+            opacities_moved: (best - 1) / 2 == 1,
         });
-        let [offsets_coding, levels_coding] = codings;
-        Ok(kept.then_some(if best == 2 {
-            levels_coding
-        } else {
-            offsets_coding
-        }))
+        Ok(kept.then(|| codings.swap_remove(best - 1)))
     }
 
     fn dynamic_payloads(
