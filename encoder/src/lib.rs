@@ -215,7 +215,8 @@ pub struct EncoderConfig {
     /// With [`Self::refit_colours`]: first move the stored opacities along their quantiser's
     /// levels so the decoded scene renders closer to the source
     /// ([`dlgs_render::opacity_fit`]), then fit the colours to that. The judge sees this refit
-    /// and the colours refit alone, and stores the one that renders closest.
+    /// and the colours refit alone, and stores the one that renders closest: two fits, and the
+    /// scene coded five times.
     pub refit_opacities: bool,
     /// With [`Self::refit_colours`]: fit to views of 640x480 instead of 320x240
     /// ([`colour_refit::fit_views`]): about 5x the fit's time for 0.1-0.3 dB.
