@@ -66,19 +66,27 @@ pub fn holdout_views(g: &Gaussians) -> Vec<Camera> {
     cams
 }
 
-/// The fit's views of `source` and its renders of them.
-fn fit_targets(source: &Gaussians, full_size: bool) -> (Vec<Camera>, Vec<Vec<f32>>) {
-    let cams = fit_views(source, full_size);
-    let opts = RenderOptions::default();
-    let targets: Vec<Vec<f32>> = cams
-        .iter()
-        .map(|c| {
-            render(source, c, &opts)
-                .map(|i| i.color)
-                .unwrap_or_else(|_| vec![0.0; (c.width * c.height * 3) as usize])
-        })
-        .collect();
-    (cams, targets)
+/// The fit's views of the source and its renders of them: made once for every fit the encoder
+/// judges.
+pub struct FitTargets {
+    cams: Vec<Camera>,
+    targets: Vec<Vec<f32>>,
+}
+
+impl FitTargets {
+    pub fn of(source: &Gaussians, full_size: bool) -> FitTargets {
+        let cams = fit_views(source, full_size);
+        let opts = RenderOptions::default();
+        let targets: Vec<Vec<f32>> = cams
+            .iter()
+            .map(|c| {
+                render(source, c, &opts)
+                    .map(|i| i.color)
+                    .unwrap_or_else(|_| vec![0.0; (c.width * c.height * 3) as usize])
+            })
+            .collect();
+        FitTargets { cams, targets }
+    }
 }
 
 /// Sweeps of the lattice search after the continuous fit ([`fit`]): on lod1 one
@@ -96,8 +104,8 @@ pub struct Refits {
     pub opacity_moves: Vec<i32>,
 }
 
-/// Colour changes that bring `decoded` closer to `source` over [`fit_views`]: the continuous
-/// fit's offsets ([`fit_colour_offsets`]) and the same in whole quantiser steps (Gaussian `k`'s
+/// Colour changes that bring `decoded` closer to the source over `views` ([`fit_views`]): the
+/// continuous fit's offsets ([`fit_colour_offsets`]) and the same in whole quantiser steps (Gaussian `k`'s
 /// channel `c` moves by a number of `steps[k][c]`, colour, within `moves[k][c]`), put there by
 /// a search ([`snap_colour_offsets`]). Where the steps are wide the coder rounds each offset
 /// alone and loses most of what the fit found (lod2's goal row, objective over the fit views:
@@ -105,21 +113,20 @@ pub struct Refits {
 /// level shaping (`--shape`) chooses the levels it does better from the continuous offsets
 /// (fruit's goal row: 53.41 dB on the benchmark's views from the offsets, 53.08 from levels).
 pub fn fit(
-    source: &Gaussians,
+    views: &FitTargets,
     decoded: &Gaussians,
     steps: &[[f32; 3]],
     moves: &[LevelMoves],
     opacity: Option<&OpacityLevels>,
-    full_size: bool,
 ) -> Refits {
-    let (cams, targets) = fit_targets(source, full_size);
+    let (cams, targets) = (&views.cams, &views.targets);
     let bg = RenderOptions::default().background;
     let (opacity_moves, moved) = match opacity {
         Some(levels) => {
             let m = snap_opacities(
                 decoded,
-                &cams,
-                &targets,
+                cams,
+                targets,
                 bg,
                 &levels.lattice(),
                 OPACITY_SWEEPS,
@@ -131,11 +138,11 @@ pub fn fit(
         None => (vec![0; decoded.len()], None),
     };
     let decoded = moved.as_ref().unwrap_or(decoded);
-    let offsets = fit_colour_offsets(decoded, &cams, &targets, bg, ITERATIONS, DAMPING);
+    let offsets = fit_colour_offsets(decoded, cams, targets, bg, ITERATIONS, DAMPING);
     let on_levels = snap_colour_offsets(
         decoded,
-        &cams,
-        &targets,
+        cams,
+        targets,
         bg,
         &offsets,
         steps,

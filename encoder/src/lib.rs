@@ -631,26 +631,13 @@ impl<W: Write> StreamEncoder<W> {
         // The colours alone, then (when asked) the opacities and colours: the opacity search
         // can render worse on unseen views than the colours alone (gsplat's goal row), so the
         // judge sees both.
+        let views = colour_refit::FitTargets::of(source, self.cfg.refit_full_size);
         let mut fits = vec![(
-            colour_refit::fit(
-                source,
-                &decoded,
-                &steps,
-                &moves,
-                None,
-                self.cfg.refit_full_size,
-            ),
+            colour_refit::fit(&views, &decoded, &steps, &moves, None),
             None,
         )];
         if let Some(levels) = &opacity {
-            let with_opacity = colour_refit::fit(
-                source,
-                &decoded,
-                &steps,
-                &moves,
-                Some(levels),
-                self.cfg.refit_full_size,
-            );
+            let with_opacity = colour_refit::fit(&views, &decoded, &steps, &moves, Some(levels));
             fits.push((with_opacity, Some(levels)));
         }
         // Each fit as continuous offsets rounded by the coder, then on the quantiser's levels.
