@@ -643,6 +643,8 @@ impl<W: Write> StreamEncoder<W> {
         // Each fit as continuous offsets rounded by the coder, then on the quantiser's levels.
         let mut codings = Vec::with_capacity(2 * fits.len());
         let mut redecoded = Vec::with_capacity(2 * fits.len());
+        // Per coding: (on the quantiser's levels, opacities moved), for the report.
+        let mut kinds = Vec::with_capacity(2 * fits.len());
         for (fit, levels) in &fits {
             for on_levels in [false, true] {
                 let refit = RefitChoice {
@@ -653,6 +655,7 @@ impl<W: Write> StreamEncoder<W> {
                 let coding = code(&refit.apply(parts, &decoded, stored, &place, &lattice))?;
                 redecoded.push(sorted_grid::decode(&coding.0, 0, scene, &limits)?.statics);
                 codings.push(coding);
+                kinds.push((on_levels, levels.is_some()));
             }
         }
         let mut candidates = vec![&decoded];
@@ -666,8 +669,8 @@ impl<W: Write> StreamEncoder<W> {
             before_db: scores[0],
             after_db: scores[best],
             kept,
-            on_levels: (best - 1) % 2 == 1,
-            opacities_moved: (best - 1) / 2 == 1,
+            on_levels: kinds[best - 1].0,
+            opacities_moved: kinds[best - 1].1,
         });
         Ok(kept.then(|| codings.swap_remove(best - 1)))
     }
