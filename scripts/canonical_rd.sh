@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Canonical compression side by side on every real scene (issue 5, BENCHMARKS.md): raw PLY,
+# Canonical compression side by side on every real scene (issue 5, docs/benchmarks/canonical.md): raw PLY,
 # SPZ v4 and PlayCanvas SOG v2 (from scripts/peers.sh), and dlgs CSOG at high/medium/low, with
 # and without bit reallocation, level shaping and importance tiers.
 # Rendered PSNR/SSIM against the uncompressed scene from 8 orbit cameras (dlgs compare).

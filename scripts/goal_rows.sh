@@ -4,32 +4,32 @@
 # SPZ files of scripts/peers.sh. Prints a markdown table: bytes, % of SOG, % of SPZ, PSNR and
 # SSIM over the 8 orbit cameras of `dlgs compare` (SOG's in brackets), encode seconds.
 # Rows with two tier fractions (`--tiers A,B`) were found by trying a handful of fractions on each
-# scene (BENCHMARKS.md lists them), so they are tuned to these scenes; the fruit and gsplat rows
+# scene (docs/benchmarks/canonical.md lists them), so they are tuned to these scenes; the fruit and gsplat rows
 # were the options `--target-psnr <SOG's PSNR>` printed for the file it kept (2026-11-24), so is the lod1
 # row (`--target-psnr 48.63 --refit-colours`: the search, then its refit stage) but for its rotation factor, 1.7
 # instead of 1.5, tried by hand after the refit put its colours on the quantiser's levels; donut's factor 2 was tried by hand (its
 # search's file was larger); big's bits are those of its search at commit 0e4679a, its tier fractions and
-# coarse-rotation factor were tried by hand with format 1.13 (2026-11-24, BENCHMARKS.md "Mixed contexts"). `--refit-colours` (which the search does not try) and the coarser options
-# it allows on lod3, fruit, lod2 and gsplat were tried by hand (BENCHMARKS.md "Colour refit"; fruit's shaping went back from 0.2 to 0.15 when the refit learnt the levels); the refit's
+# coarse-rotation factor were tried by hand with format 1.13 (2026-11-24, docs/benchmarks/canonical-levers.md "Mixed contexts"). `--refit-colours` (which the search does not try) and the coarser options
+# it allows on lod3, fruit, lod2 and gsplat were tried by hand (docs/benchmarks/canonical-levers.md "Colour refit"; fruit's shaping went back from 0.2 to 0.15 when the refit learnt the levels); the refit's
 # judge refuses it on donut, plant, and the 273k scene, so their rows go without.
 # Every row writes no META chunk (`--no-meta`: no encoder name, source file name or settings; about 200 bytes;
-# since 2026-11-25). lod2's second tier fraction went from 0.17 to 0.185 with format 1.14 (BENCHMARKS.md "Compact records").
+# since 2026-11-25). lod2's second tier fraction went from 0.17 to 0.185 with format 1.14 (docs/benchmarks/canonical-levers.md "Compact records").
 # The mosaic's row (2026-11-25) is the options `--target-psnr 49.07` printed with format 1.14, plus `--refit-colours`
-# and rotation factor 1.25 by hand (BENCHMARKS.md "Where we are").
+# and rotation factor 1.25 by hand (docs/benchmarks/canonical.md "Where we are").
 # The plant's first tier fraction went from 0.3 to 0.35 when its SH DC levels moved onto its 8-bit colours (2026-11-25,
-# BENCHMARKS.md "Colour lattice"), and back to 0.3 on 2026-11-26, where 0.35 fell 0.02 dB under SOG on 32 views; the
+# docs/benchmarks/canonical-levers.md "Colour lattice"), and back to 0.3 on 2026-11-26, where 0.35 fell 0.02 dB under SOG on 32 views; the
 # donut's row took 15-bit positions and --tiers 0.05, the 273k rows --tiers 0.15,0.015, lod3's --tiers 0.7,0.3 (the
-# same day, BENCHMARKS.md "Where we are"); lod3's took --tiers 0.8,0.4 with --refit-opacities --refit-full-size on
+# same day, docs/benchmarks/canonical.md "Where we are"); lod3's took --tiers 0.8,0.4 with --refit-opacities --refit-full-size on
 # 2026-11-27 (18,870 B; about 3 min of encoding).
 # TARGET=1: instead of those options, each scene is coded with `--target-psnr <SOG's PSNR on the
-# benchmark views>`: the encoder's own search, on views of its own (BENCHMARKS.md "Target PSNR").
+# benchmark views>`: the encoder's own search, on views of its own (docs/benchmarks/canonical-levers.md "Target PSNR").
 # EXTRA="OPTIONS": appended to every row's options (e.g. EXTRA=--fast-decode OUT=target/goal_rows_fast:
-# the same rows in files that decode faster, BENCHMARKS.md "Decode time against SOG and SPZ").
+# the same rows in files that decode faster, docs/benchmarks/decode.md "Decode time against SOG and SPZ").
 # WIDE=N (default 32; WIDE=0 leaves it out): one more column, the mean PSNR over N orbit cameras (`dlgs
 # compare --orbit N`; the 8 default views are every (N/8)-th of them when N is a multiple of 8) for ours and SOG's:
 # a single view's PSNR moves by several dB with any change of levels at these qualities, so 8 views are a small
 # sample. Every row holds SOG's PSNR on both the 8 and the 32 views (2026-11-26: the lod3, donut, plant and 273k
-# rows were re-chosen for that; BENCHMARKS.md "Where we are"). Each row then renders 2 x N more views at 1352x1014.
+# rows were re-chosen for that; docs/benchmarks/canonical.md "Where we are"). Each row then renders 2 x N more views at 1352x1014.
 # The wave row (2026-11-26) is the first frame of the real SOG sequence, which dlgs reads itself (bit for bit as
 # splat-transform decodes it); its options are those `--target-psnr 60.5` printed with sh_dc one bit finer by hand.
 # Usage: bash scripts/goal_rows.sh  (~20 min, WIDE=0 ~8 min, TARGET=1 ~20 min; needs target/peers, target/peers-large and
@@ -91,5 +91,5 @@ row target/peers-wave "$(scene_path sequence/playcanvas_wave_200f/wave_0001.sog)
 row target/peers-mosaic "$PWD/target/mosaic.ply" --no-meta --bits position=13,log_scale=7,rotation=9,opacity=7,sh_dc=8 --tiers 0.3,0.05 --coarse-rotations 1.25 --refit-colours
 row target/peers-large "$PWD/target/big.ply" --no-meta --bits position=15,log_scale=8,rotation=8,opacity=9,sh_dc=8 --tiers 0.15,0.015 --coarse-rotations 2
 # The same Gaussians with the second plant in another order: SPZ v4 codes the repeat of big.ply's
-# second plant in its zstd streams, SOG and dlgs sort every scene first (BENCHMARKS.md "The 273k scene's repeat and SPZ").
+# second plant in its zstd streams, SOG and dlgs sort every scene first (docs/benchmarks/canonical-large.md "The 273k scene's repeat and SPZ").
 row target/peers-large-shuffled "$PWD/target/big_shuf.ply" --no-meta --bits position=15,log_scale=8,rotation=8,opacity=9,sh_dc=8 --tiers 0.15,0.015 --coarse-rotations 2

@@ -6,7 +6,7 @@
 # Usage: bash scripts/large_scene_rd.sh [OUT_DIR]  (default target/peers-large; ~3 min)
 # MOSAIC=1: the 209,435-Gaussian mosaic of every real scene once instead (bench_scenes::mosaic,
 # target/mosaic.ply; default OUT_DIR target/peers-mosaic). The 273k scene repeats the plant
-# exactly, and SOG codes the repeat for 70 % of the first copy's bytes (dlgs: 91 %; BENCHMARKS.md);
+# exactly, and SOG codes the repeat for 70 % of the first copy's bytes (dlgs: 91 %; docs/benchmarks/canonical-large.md);
 # the mosaic has no repeats.
 # SETTINGS="..." picks the dlgs rows as in canonical_rd.sh (default: the presets, with and
 # without tiers; --reallocate-bits on 273k Gaussians takes minutes per row).

@@ -2,7 +2,7 @@
 # Decode time side by side: PlayCanvas SOG and SPZ with @playcanvas/splat-transform 2.7.1's own
 # readers (Node; SPZ through the official SPZ WebAssembly library), and dlgs files with
 # `decode_timing`, each from bytes in memory to Gaussians in memory, median of RUNS after a
-# warm-up (BENCHMARKS.md "Decode time against SOG and SPZ").
+# warm-up (docs/benchmarks/decode.md "Decode time against SOG and SPZ").
 # Usage: bash scripts/peer_decode.sh PEER_DIR... -- DLGS_FILE...
 #   PEER_DIR: folders made by scripts/peers.sh (their .sog and .spz files are timed).
 #   Env: RUNS (default 9). Needs node/npm (installs splat-transform into target/peer-node once).

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Convert every real scene of ../shared/data with the peer formats, for the canonical compression
-# comparison (BENCHMARKS.md): PlayCanvas SOG v2 and SPZ v4, both with
+# comparison (docs/benchmarks/canonical.md): PlayCanvas SOG v2 and SPZ v4, both with
 # `@playcanvas/splat-transform` 2.7.1 (npm), CPU only, then back to PLY so our renderer can
 # measure them. Output: $OUT/<scene>.{sog,spz}, $OUT/<scene>.{sog,spz}.ply, $OUT/times.tsv.
 # Usage: bash scripts/peers.sh [OUT]   (default target/peers; needs node/npx)

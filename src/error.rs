@@ -88,6 +88,13 @@ pub enum ErrorKind {
     /// The encoder was given input it refuses to write (e.g. NaN).
     #[error("invalid input: {0}")]
     InvalidInput(String),
+    /// The file's time features are HEVC (§6.2, `TFEA` codecs 1-3) and the decoder was built
+    /// without one (`dlgs-decoder` without its `hevc` feature) and given none.
+    #[error(
+        "the time features are HEVC and this decoder has no HEVC decoder (build dlgs-decoder \
+         with its `hevc` feature, or set a key-picture decoder)"
+    )]
+    NoHevcDecoder,
 }
 
 /// An [`ErrorKind`] plus the absolute byte offset where it was found.
@@ -127,6 +134,7 @@ impl Error {
             ErrorKind::Io(_) => "Io",
             ErrorKind::Request(_) => "Request",
             ErrorKind::InvalidInput(_) => "InvalidInput",
+            ErrorKind::NoHevcDecoder => "NoHevcDecoder",
         }
     }
 }

@@ -4,9 +4,13 @@
 //! The byte-level specification is `format-spec/dlgs.md`; every reader here enforces it.
 //! This crate has no FFI and no `unsafe`.
 #![forbid(unsafe_code)]
+// Decoding gives the same floats on every platform: no libm transcendental (clippy.toml), only
+// `elementary`; encoder-side uses are allowed where they stand.
+#![deny(clippy::disallowed_methods)]
 
 pub mod bytes;
 pub mod container;
+pub mod elementary;
 pub mod error;
 pub mod interop;
 pub mod limits;

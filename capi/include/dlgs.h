@@ -26,6 +26,9 @@ typedef enum DlgsStatus {
   DLGS_STATUS_BUFFER_TOO_SMALL = 5,
   // An internal error (a bug): the decoder must not be used again.
   DLGS_STATUS_PANIC = 6,
+  // The stream's time features are HEVC and this library has no HEVC decoder (built
+  // without FFmpeg): set one with `dlgs_set_hevc_decoder`.
+  DLGS_STATUS_NO_HEVC_DECODER = 7,
 } DlgsStatus;
 
 // An open stream. Opaque to C.
@@ -75,6 +78,20 @@ typedef struct DlgsFrameBuffers {
   // How many Gaussians each buffer holds.
   size_t capacity;
 } DlgsFrameBuffers;
+
+// Decodes `packet_count` HEVC Main 12 4:0:0 access units (`packets[i]` of `packet_lens[i]`
+// bytes, in decode order) into exactly `expect` pictures of `width` x `height` 12-bit samples,
+// written row-major, picture after picture, into `out` (`expect * width * height` values).
+// Returns 0 on success, anything else on failure (the frame decode then fails with
+// `DLGS_STATUS_FORMAT`). May be called from any thread, also concurrently.
+typedef int32_t (*DlgsHevcDecodeFn)(void *user,
+                                    const uint8_t *const *packets,
+                                    const size_t *packet_lens,
+                                    size_t packet_count,
+                                    uint32_t width,
+                                    uint32_t height,
+                                    size_t expect,
+                                    uint16_t *out);
 
 #ifdef __cplusplus
 extern "C" {
@@ -128,6 +145,17 @@ void dlgs_close(struct DlgsDecoder *d);
 
 // The library version, e.g. "0.1.0".
 const char *dlgs_version(void);
+
+// Decode the stream's HEVC time features with `decode` (called with `user`) instead of the
+// library's own decoder (FFmpeg, in builds with it). In a library built without FFmpeg this is
+// how a player decodes files whose time features are HEVC; files with exact time features and
+// still files need no HEVC decoder. GOPs already decoded are decoded again when next needed.
+//
+// # Safety
+// `d` is NULL or an open decoder not used by another thread during the call; `decode` is
+// NULL or a function that follows `DlgsHevcDecodeFn`'s contract with `user` for as long as
+// the decoder is open.
+enum DlgsStatus dlgs_set_hevc_decoder(struct DlgsDecoder *d, DlgsHevcDecodeFn decode, void *user);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -16,6 +16,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use dlgs::model::Gaussians;
 use dlgs_decoder::{Decoder, FrameOptions};
 
+mod hevc;
+pub use hevc::{dlgs_set_hevc_decoder, DlgsHevcDecodeFn};
+
 /// Result of every call.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,6 +36,9 @@ pub enum DlgsStatus {
     BufferTooSmall = 5,
     /// An internal error (a bug): the decoder must not be used again.
     Panic = 6,
+    /// The stream's time features are HEVC and this library has no HEVC decoder (built
+    /// without FFmpeg): set one with `dlgs_set_hevc_decoder`.
+    NoHevcDecoder = 7,
 }
 
 /// What a stream holds. Counts are per frame and the same for every frame.
@@ -111,6 +117,7 @@ fn fail(status: DlgsStatus, msg: impl Into<String>) -> DlgsStatus {
 fn format_error(e: dlgs::Error) -> DlgsStatus {
     let status = match e.kind {
         dlgs::ErrorKind::Io(_) => DlgsStatus::Io,
+        dlgs::ErrorKind::NoHevcDecoder => DlgsStatus::NoHevcDecoder,
         _ => DlgsStatus::Format,
     };
     fail(status, e.to_string())
@@ -347,6 +354,7 @@ pub extern "C" fn dlgs_status_name(status: i32) -> *const c_char {
         4 => c"DLGS_STATUS_TIME_OUT_OF_RANGE",
         5 => c"DLGS_STATUS_BUFFER_TOO_SMALL",
         6 => c"DLGS_STATUS_PANIC",
+        7 => c"DLGS_STATUS_NO_HEVC_DECODER",
         _ => c"unknown status",
     };
     s.as_ptr()

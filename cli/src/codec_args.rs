@@ -22,7 +22,7 @@ pub struct CodecArgs {
     /// Canonical Gaussians: `lossless` (f32, CRAW) or sorted quantised grids (CSOG) at preset
     /// `near-lossless`, `high`, `medium` or `low` (bits per attribute in format-spec §6.5).
     /// `near-lossless` also stores the decoders in f16 (as `--mlp-f16`): on the reference-run
-    /// fixture it renders at >= 64 dB against the lossless model (BENCHMARKS.md "Ingest").
+    /// fixture it renders at >= 64 dB against the lossless model (docs/benchmarks/ingest.md).
     #[arg(long, default_value = "lossless")]
     pub quality: String,
     /// Override quantisation bits, e.g. `position=15,sh_rest=5` (keys: position, log_scale,
@@ -32,7 +32,8 @@ pub struct CodecArgs {
     pub bits: Option<String>,
     /// Grid sort refinement passes per radius (PLAS-style, after the k-d layout). 0 (default)
     /// = the k-d layout only: fastest and, on every real scene measured, the smallest files;
-    /// refinement smooths colours at the cost of position coherence (BENCHMARKS.md "Grid sort").
+    /// refinement smooths colours at the cost of position coherence
+    /// (docs/benchmarks/canonical-levers.md "Grid sort").
     #[arg(long, default_value_t = 0)]
     pub sort_passes: u32,
     /// Keep each static Gaussian's rotation as given. By default, scenes without residual GOPs
@@ -45,15 +46,16 @@ pub struct CodecArgs {
     /// Gaussians are stored in an order every reader derives from the positions (layouts 2-4,
     /// format-spec §6.5.5): 13-14 % fewer position bytes on the real scenes (2-5 % of the file);
     /// grid positions decode faster (273k Gaussians at `high`: 161-186 ms instead of 238-253,
-    /// in a 6.5 % larger file that also keeps every rotation at full bits; BENCHMARKS.md
-    /// "Decode time")
+    /// in a 6.5 % larger file that also keeps every rotation at full bits;
+    /// docs/benchmarks/decode.md "The 273k scene by format")
     #[arg(long)]
     pub grid_positions: bool,
     /// Octree positions: store the rotation of each Gaussian too small for one rotation step
     /// to move its surface by FACTOR position steps up to 4 bits coarser, one bit per halving
     /// of its largest scale (layout 3, format-spec §6.5.6). 0 = every rotation at the preset's
     /// bits (layout 2, as files of format 1.10). The default, 1, makes SH 0 scenes and gsplat
-    /// 1-4 % smaller for 0.00-0.33 dB (BENCHMARKS.md "Coarse rotations"); 2 saves about twice
+    /// 1-4 % smaller for 0.00-0.33 dB (docs/benchmarks/canonical-levers.md "Coarse rotations");
+    /// 2 saves about twice
     /// as much for up to 1.7 dB. [default: 1, or 0 with --grid-positions]
     #[arg(long, value_name = "FACTOR")]
     pub coarse_rotations: Option<f32>,
@@ -75,15 +77,16 @@ pub struct CodecArgs {
     /// Lossy canonical coding: leave out codec 5's mixed-context modes, which code some
     /// channels 1-5 % smaller but decode about 3 times slower per channel. The same quantised
     /// values (so the same PSNR) in files 1.5-3.1 % larger that decode in about half the time
-    /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores; BENCHMARKS.md
-    /// "Decode time against SOG and SPZ"). Format unchanged: every reader decodes both.
+    /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores;
+    /// docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Format unchanged: every
+    /// reader decodes both.
     #[arg(long, conflicts_with = "mixed_margin")]
     pub fast_decode: bool,
     /// Lossy canonical coding: a channel takes codec 5's mixed-context modes only where they
     /// are this many percent smaller than its best other coding. Between the default and
     /// `--fast-decode`: the plant's goal row is 0.3 % larger with 2 and decodes 27 % faster,
     /// 1.2 % larger with 5 and 43 % faster; the 273k scene's 0.2 % and 16 %, 1.1 % and 35 %
-    /// (BENCHMARKS.md "Decode time against SOG and SPZ"). Same values, same PSNR.
+    /// (docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Same values, same PSNR.
     #[arg(long, value_name = "PERCENT", default_value_t = 100.0 * grid_coder::MIXED_MARGIN)]
     pub mixed_margin: f64,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
@@ -96,7 +99,8 @@ pub struct CodecArgs {
     /// least estimated bits plus squared error weighted by the Gaussian's importance (blending
     /// weight over 36 views of its own, relative to the mean) over TOL (format-spec §6.5.4).
     /// 0 = nearest levels. 0.1 halves SH 3 scenes like gsplat at -0.02 dB on the benchmark's
-    /// views; views unlike the importance pass's lose more (BENCHMARKS.md). Costs 36 renders
+    /// views; views unlike the importance pass's lose more
+    /// (docs/benchmarks/canonical.md "Level shaping"). Costs 36 renders
     /// at 640x480.
     #[arg(long, value_name = "TOL", default_value_t = 0.0)]
     pub shape: f64,
@@ -117,7 +121,8 @@ pub struct CodecArgs {
     /// and code the colours again, both as fitted and put on the quantiser's levels; the one
     /// that 12 other views of its own render closest to the source is stored if it beats the
     /// first coding (format unchanged). The colours absorb part of the error of the quantised
-    /// positions, shapes and opacities (BENCHMARKS.md "Colour refit"). Codes the scene three
+    /// positions, shapes and opacities (docs/benchmarks/canonical-levers.md "Colour refit").
+    /// Codes the scene three
     /// times, plus the fit. With --target-psnr: the search's closest candidates below the target are
     /// also tried with the refit (at most 4, each with the cost above).
     #[arg(long)]
@@ -126,11 +131,13 @@ pub struct CodecArgs {
     /// quantiser's levels so the decoded scene renders closer to the source from the same 36
     /// views (a Gauss-Newton search, four sweeps, each view rendered 33 times), then fit the
     /// colours to those opacities. The judge weighs this refit and the colours refit alone and
-    /// stores the best, if it beats the first coding (BENCHMARKS.md "Opacity refit").
+    /// stores the best, if it beats the first coding
+    /// (docs/benchmarks/canonical-levers.md "Opacity refit").
     #[arg(long, requires = "refit_colours")]
     pub refit_opacities: bool,
     /// With --refit-colours: fit to the 36 views at 640x480 instead of 320x240: about 5x the
-    /// fit's time, 0.1-0.3 dB on the real scenes' goal rows (BENCHMARKS.md "Opacity refit").
+    /// fit's time, 0.1-0.3 dB on the real scenes' goal rows
+    /// (docs/benchmarks/canonical-levers.md "Opacity refit").
     #[arg(long, requires = "refit_colours")]
     pub refit_full_size: bool,
     /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
@@ -142,7 +149,7 @@ pub struct CodecArgs {
     /// gets there, the scene is stored lossless (at once for DB above 100, the cap each view's
     /// PSNR counts at). Prints the options of the file kept.
     /// Replaces --quality, --bits, --tiers, --shape and --reallocate-bits; 50-380 s on the
-    /// real scenes, 500 s on 273k Gaussians (BENCHMARKS.md "Target PSNR").
+    /// real scenes, 500 s on 273k Gaussians (docs/benchmarks/canonical-levers.md "Target PSNR").
     #[arg(
         long,
         value_name = "DB",
@@ -166,7 +173,7 @@ pub struct CodecArgs {
     pub lossless_features: bool,
     /// Code every time-feature key as its own intra picture (`TFEA` codec 3), so a seek decodes
     /// the 2 keys around t instead of the GOP's 7. Bytes and error at the same crf, and the
-    /// seek time it buys, are in BENCHMARKS.md ("Seeking").
+    /// seek time it buys, are in docs/benchmarks/residuals-seek.md ("Seek latency").
     #[arg(long)]
     pub intra_features: bool,
     /// Store time features as exact f32 (zstd) instead of HEVC.
@@ -199,7 +206,7 @@ pub struct CodecArgs {
     #[arg(long)]
     pub negatives: Option<PathBuf>,
     /// Store the language decoder in f32 (default f16: half the bytes; effect on relevance
-    /// in BENCHMARKS.md).
+    /// in docs/benchmarks/queries.md).
     #[arg(long)]
     pub lang_decoder_f32: bool,
 }

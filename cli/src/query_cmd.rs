@@ -33,7 +33,7 @@ pub struct QuerySource {
     #[arg(long, default_value_t = dlgs_query::relevance::TEMPERATURE)]
     pub temperature: f32,
     /// Decode every distinct feature through the decoder instead of interpolating a table
-    /// of decoded grid points (slower; see BENCHMARKS.md for the difference).
+    /// of decoded grid points (slower; see docs/benchmarks/queries.md for the difference).
     #[arg(long)]
     pub exact: bool,
     /// Table points per axis when not --exact.

@@ -11,6 +11,7 @@ use dlgs::payload::{
 };
 use dlgs::{Error, ErrorKind, Limits, Result};
 
+use crate::hevc::SharedKeyPictureDecoder;
 use crate::planar::{KeySource, PlanarFeatures};
 use crate::{DecodedGop, Deformer, State};
 
@@ -18,14 +19,31 @@ fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
     chunks.iter().find(|c| c.ty == ty).copied()
 }
 
-fn video_error(e: dlgs_video::VideoError, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::TFEA,
-            reason: e.to_string(),
-        },
-        at,
+/// Decode key pictures with `hevc`, or fail with `NoHevcDecoder` when there is none. A
+/// decoder's failure is a fault of the `TFEA` payload at `at`.
+fn key_pictures(
+    hevc: Option<&SharedKeyPictureDecoder>,
+    packets: &[&[u8]],
+    tiling: &Tiling,
+    expect: usize,
+    at: u64,
+) -> Result<Vec<Vec<u16>>> {
+    let hevc = hevc.ok_or_else(|| Error::new(ErrorKind::NoHevcDecoder, at))?;
+    hevc.decode(
+        packets,
+        tiling.width() as u32,
+        tiling.height() as u32,
+        expect,
     )
+    .map_err(|reason| {
+        Error::new(
+            ErrorKind::Payload {
+                chunk: ChunkType::TFEA,
+                reason,
+            },
+            at,
+        )
+    })
 }
 
 /// Decode a GOP's canonical chunk, or apply its residual chunk to `base` (the reference GOP's
@@ -108,6 +126,7 @@ pub(crate) fn dynamic_payloads(
 pub(crate) fn decode_dynamic(
     scene: &SceneHeader,
     limits: &Limits,
+    hevc: Option<&SharedKeyPictureDecoder>,
     p: &DynamicPayloads,
 ) -> Result<(PlanarFeatures, DeformMlps)> {
     let (bytes, at) = (&p.tfea.0, p.tfea.1);
@@ -128,6 +147,7 @@ pub(crate) fn decode_dynamic(
                 ranges,
                 packets,
                 at,
+                hevc: hevc.cloned(),
             }),
         ),
         TfeaBody::Hevc {
@@ -138,21 +158,15 @@ pub(crate) fn decode_dynamic(
             ..
         } => {
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
-            let video = dlgs_video::decode_gray12(
-                &refs,
-                tiling.width() as u32,
-                tiling.height() as u32,
-                tiling.keys,
-            )
-            .map_err(|e| video_error(e, at))?;
+            let frames = key_pictures(hevc, &refs, &tiling, tiling.keys, at)?;
             let data = match reference {
                 Some(range) => time_features::untile_columns(
-                    &video.frames,
+                    &frames,
                     &tiling,
                     time_features::reference_sample_value(range),
                 ),
                 None => time_features::untile_columns(
-                    &video.frames,
+                    &frames,
                     &tiling,
                     time_features::sample_value(&ranges),
                 ),
@@ -171,21 +185,22 @@ struct IntraKeys {
     packets: Vec<Vec<u8>>,
     /// Offset of the `TFEA` payload, for errors.
     at: u64,
+    hevc: Option<SharedKeyPictureDecoder>,
 }
 
 impl KeySource for IntraKeys {
     fn key(&self, k: usize) -> Result<Vec<f32>> {
         let t = &self.tiling;
-        let video = dlgs_video::decode_gray12(
+        let frames = key_pictures(
+            self.hevc.as_ref(),
             &[self.packets[k].as_slice()],
-            t.width() as u32,
-            t.height() as u32,
+            t,
             1,
-        )
-        .map_err(|e| video_error(e, self.at))?;
+            self.at,
+        )?;
         let one = Tiling { keys: 1, ..*t };
         Ok(time_features::untile_columns(
-            &video.frames,
+            &frames,
             &one,
             time_features::sample_value(&self.ranges),
         ))
@@ -215,6 +230,7 @@ pub(crate) fn assemble(
 pub(crate) fn gop(
     scene: &SceneHeader,
     limits: &Limits,
+    hevc: Option<&SharedKeyPictureDecoder>,
     g: u32,
     chunks: &[ChunkInfo],
     gop_at: u64,
@@ -222,7 +238,7 @@ pub(crate) fn gop(
     payload: impl FnMut(&ChunkInfo) -> Result<Vec<u8>>,
 ) -> Result<DecodedGop> {
     let dynamic = dynamic_payloads(scene, chunks, gop_at, payload)?
-        .map(|p| decode_dynamic(scene, limits, &p))
+        .map(|p| decode_dynamic(scene, limits, hevc, &p))
         .transpose()?;
     Ok(assemble(scene, g, state, dynamic))
 }

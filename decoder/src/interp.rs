@@ -1,5 +1,8 @@
 //! The reference implementation's interpolators (format-spec §6.4), reproduced exactly,
-//! including its guards.
+//! including its guards. `sin` and `acos` are the format crate's own (Appendix B), so a frame
+//! has the same bits on every platform.
+
+use dlgs::elementary::{acos_f32, sin_f32};
 
 /// `F.normalize(q, eps=1e-12)`: a zero quaternion stays zero.
 #[inline]
@@ -28,16 +31,16 @@ pub fn hermite(p0: [f32; 3], m0: [f32; 3], p1: [f32; 3], m1: [f32; 3], d: f32) -
 pub fn slerp_angle(q0: [f32; 4], q1: [f32; 4]) -> [f32; 2] {
     let dot = (q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3])
         .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
-    let omega = dot.acos().max(1e-4);
-    [omega, omega.sin().max(1e-4)]
+    let omega = acos_f32(dot).max(1e-4);
+    [omega, sin_f32(omega).max(1e-4)]
 }
 
 /// The blend part of `slerp_interpolate`, given [`slerp_angle`]`(q0, q1)`: weights renormalised
 /// to sum 1, no shortest-arc flip, then normalised.
 #[inline]
 pub fn slerp_blend(q0: [f32; 4], q1: [f32; 4], [omega, s]: [f32; 2], d: f32) -> [f32; 4] {
-    let mut p0 = ((1.0 - d) * omega).sin() / s;
-    let mut p1 = (d * omega).sin() / s;
+    let mut p0 = sin_f32((1.0 - d) * omega) / s;
+    let mut p1 = sin_f32(d * omega) / s;
     let sum = (p0 + p1).max(1e-4);
     p0 /= sum;
     p1 /= sum;

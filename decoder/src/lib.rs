@@ -1,8 +1,11 @@
 //! `dlgs-decoder`: random-access decoding of `.dlgs` streams, including the dynamic
 //! Gaussians at any time t (format-spec §6.4).
+// Frames have the same bits on every platform: no libm transcendental (clippy.toml).
+#![deny(clippy::disallowed_methods)]
 
 mod build;
 pub mod deform;
+pub mod hevc;
 pub mod interp;
 mod lru;
 pub mod panel;
@@ -23,6 +26,7 @@ use dlgs::payload::lang_decoder;
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
+pub use hevc::{KeyPictureDecoder, SharedKeyPictureDecoder};
 use lru::GopLru;
 
 /// One decoded GOP: canonical Gaussians and, if the scene has dynamics, its deformation field.
@@ -106,6 +110,8 @@ pub struct Decoder<R: Read + Seek> {
     /// Decoded canonical states of recent GOPs (GOP 0 is kept while the cache holds anything:
     /// it is every parallel-mode GOP's reference).
     states: GopLru<State>,
+    /// Decodes HEVC time features; `None` without the `hevc` feature until a player sets one.
+    hevc: Option<SharedKeyPictureDecoder>,
 }
 
 impl Decoder<BufReader<File>> {
@@ -126,7 +132,16 @@ impl<R: Read + Seek> Decoder<R> {
             reader: FileReader::open_with_limits(src, limits)?,
             gops: GopLru::new(1, None),
             states: GopLru::new(4, Some(0)),
+            hevc: hevc::default_decoder(),
         })
+    }
+
+    /// Decode HEVC time features with `decoder` instead of the default (FFmpeg with the `hevc`
+    /// feature; none without it, so files with HEVC features fail with `NoHevcDecoder`).
+    /// GOPs already decoded are dropped from the cache.
+    pub fn set_key_picture_decoder(&mut self, decoder: SharedKeyPictureDecoder) {
+        self.hevc = Some(decoder);
+        self.gops.clear();
     }
 
     pub fn scene(&self) -> &SceneHeader {
@@ -173,6 +188,7 @@ impl<R: Read + Seek> Decoder<R> {
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
+        let hevc = self.hevc.clone();
         let reader = &mut self.reader;
         let payloads = build::dynamic_payloads(&scene, &chunks, gop_at, |c| reader.payload(c))?;
         // The time features (HEVC decode) need nothing of the canonical state: decode them on
@@ -183,7 +199,7 @@ impl<R: Read + Seek> Decoder<R> {
             let worker = s.spawn(|| {
                 let dynamic = payloads
                     .as_ref()
-                    .map(|p| build::decode_dynamic(&scene, &limits, p))
+                    .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), p))
                     .transpose()?;
                 if let Some((features, _)) = &dynamic {
                     features.ensure_keys(keys)?;
@@ -210,7 +226,8 @@ impl<R: Read + Seek> Decoder<R> {
     /// How many decoded GOPs (canonical state, time features as far as decoded, decoders) to
     /// keep, least recently used dropped first; at least 1, the default. More makes a jump
     /// back into a kept GOP cost only the frame, at the memory of those GOPs: on the
-    /// 273k-Gaussian benchmark stream (81,876 dynamic) about 45 MB per GOP (BENCHMARKS.md).
+    /// 273k-Gaussian benchmark stream (81,876 dynamic) about 45 MB per GOP
+    /// (docs/benchmarks/residuals-seek.md "Keeping decoded GOPs").
     pub fn set_gop_cache(&mut self, capacity: usize) {
         self.gops.reset(capacity.max(1));
     }

@@ -26,6 +26,11 @@ impl<T: Clone> GopLru<T> {
         self.entries.clear();
     }
 
+    /// Drop every entry, keeping the capacity.
+    pub(crate) fn clear(&mut self) {
+        self.entries.clear();
+    }
+
     pub(crate) fn get(&mut self, g: u32) -> Option<T> {
         self.clock += 1;
         let now = self.clock;

@@ -165,6 +165,7 @@ impl PanelMlp {
 }
 
 #[cfg(test)]
+#[allow(clippy::disallowed_methods)] // the platform libm as a reference or test data
 mod tests {
     use super::*;
     use dlgs::model::{Layer, MlpRole};

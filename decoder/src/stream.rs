@@ -13,6 +13,7 @@ use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::payload::lang_decoder;
 use dlgs::{Error, ErrorKind, Limits, Result};
 
+use crate::hevc::SharedKeyPictureDecoder;
 use crate::{build, DecodedGop, State};
 
 /// Decodes GOPs in file order from a `Read`.
@@ -29,6 +30,8 @@ pub struct StreamDecoder<R: Read> {
     ended: bool,
     /// Time spent decoding the last GOP (not waiting for its bytes).
     last_decode: Duration,
+    /// Decodes HEVC time features (see [`crate::hevc`]).
+    hevc: Option<SharedKeyPictureDecoder>,
 }
 
 impl<R: Read> StreamDecoder<R> {
@@ -48,6 +51,7 @@ impl<R: Read> StreamDecoder<R> {
             last: None,
             ended: false,
             last_decode: Duration::ZERO,
+            hevc: crate::hevc::default_decoder(),
         };
         d.read_until_next_gop(false)?;
         Ok(d)
@@ -55,6 +59,12 @@ impl<R: Read> StreamDecoder<R> {
 
     pub fn scene(&self) -> &SceneHeader {
         self.stream.scene()
+    }
+
+    /// Decode HEVC time features of the GOPs still to come with `decoder` (see
+    /// [`crate::Decoder::set_key_picture_decoder`]).
+    pub fn set_key_picture_decoder(&mut self, decoder: SharedKeyPictureDecoder) {
+        self.hevc = Some(decoder);
     }
 
     /// Bytes read from the source so far.
@@ -160,7 +170,17 @@ impl<R: Read> StreamDecoder<R> {
             self.first = Some(state.clone());
         }
         self.last = Some((g, state.clone()));
-        let gop = build::gop(&scene, &self.limits, g, &infos, gop_at, state, &mut payload)?;
+        let hevc = self.hevc.as_ref();
+        let gop = build::gop(
+            &scene,
+            &self.limits,
+            hevc,
+            g,
+            &infos,
+            gop_at,
+            state,
+            &mut payload,
+        )?;
         // A stream is played through: do all key geometry now, while the GOP is decoded,
         // rather than on the first frame of each key interval.
         if let Some(d) = &gop.deformer {

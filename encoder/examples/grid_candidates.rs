@@ -2,7 +2,7 @@
 //! of a real scene's sorted, quantised grid (as `dlgs encode --quality Q` builds it: never-drawn
 //! Gaussians left out, orientation canonicalised, k-d layout) to `OUT_DIR/chNN.u16` (u16 LE, row-major, `width` wide) with
 //! `OUT_DIR/manifest.json`, and records the bytes of each of our grid codecs on it, so that
-//! `scripts/grid_candidates.py` can set PNG, lossless WebP and JPEG XL beside them.
+//! `experiments/canonical/grid_candidates.py` can set PNG, lossless WebP and JPEG XL beside them.
 //! `cargo run --release -p dlgs-encoder --example grid_candidates -- SCENE OUT_DIR [QUALITY]`
 
 use std::path::PathBuf;

@@ -2,8 +2,8 @@
 //!
 //! Which attribute deserves its bits depends on the scene: on the real plant capture (a `.splat`
 //! whose opacities are 8-bit already) one more opacity bit buys 1.5 dB for 0.8 % more bytes,
-//! on the lod tiles it buys nothing, on the donut colour is what counts (BENCHMARKS.md
-//! "Canonical compression"). Starting from a preset, this moves one bit at a time from the
+//! on the lod tiles it buys nothing, on the donut colour is what counts
+//! (docs/benchmarks/canonical.md). Starting from a preset, this moves one bit at a time from the
 //! attribute group whose bit costs the least quality per byte to the group whose bit buys the
 //! most, as long as the rendered PSNR rises and the coded size stays within the preset's (plus
 //! [`BYTES_TOLERANCE`]).
@@ -55,7 +55,8 @@ pub(crate) fn with(b: &QuantBits, g: &str, v: u8) -> QuantBits {
 
 /// A move may end this fraction above the preset's size: with the adaptive grid codec a move
 /// that buys 2 dB may cost a few dozen bytes more (real donut: rotation 8 / SH DC 9 bits at
-/// `high` is 0.01 % larger and 2.0 dB better; BENCHMARKS.md), and a strict bound would refuse
+/// `high` is 0.01 % larger and 2.0 dB better; docs/benchmarks/canonical.md "Grid codec 5"),
+/// and a strict bound would refuse
 /// it.
 pub const BYTES_TOLERANCE: f64 = 0.0025;
 

@@ -29,7 +29,7 @@ const DAMPING: f64 = 3.0;
 /// The views the fit matches: [`importance_views`] (640x480) with `full_size`, else at half
 /// their size (320x240), 4x fewer pixels: on lod3's goal row the colour refit reaches 51.58 dB
 /// on the benchmark's views from full-size views, 51.31 from half-size ones, in 5x the time
-/// (BENCHMARKS.md "Opacity refit").
+/// (docs/benchmarks/canonical-levers.md "Opacity refit").
 pub fn fit_views(g: &Gaussians, full_size: bool) -> Vec<Camera> {
     let views = importance_views(g);
     if full_size {

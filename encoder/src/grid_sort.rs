@@ -28,7 +28,7 @@ impl SortSpec {
     /// The k-d layout alone: on every real scene measured the PLAS-style refinement lowers the
     /// neighbour distance but *raises* the coded size (the predictive grid coder gains more
     /// from the layout's coherent positions than from smoother colours), by 0-15 % at 3 passes
-    /// and 0-8 % at 8 (BENCHMARKS.md "Grid sort"), so refinement is opt-in.
+    /// and 0-8 % at 8 (docs/benchmarks/canonical-levers.md "Grid sort"), so refinement is opt-in.
     pub const DEFAULT: SortSpec = SortSpec::NONE;
     pub const NONE: SortSpec = SortSpec { passes: 0 };
     /// The refinement at three passes per radius (the default before it was measured).

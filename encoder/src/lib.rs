@@ -205,8 +205,8 @@ pub struct EncoderConfig {
     /// smaller than any other coding by this fraction (format 1.13; default
     /// [`MIXED_MARGIN`](dlgs::payload::grid_coder::MIXED_MARGIN), `dlgs encode
     /// --mixed-margin`). `None` (`dlgs encode --fast-decode`): the same values in files 1.5-3.1 %
-    /// larger that decode in about half the time (BENCHMARKS.md "Decode time against SOG and
-    /// SPZ").
+    /// larger that decode in about half the time (docs/benchmarks/decode.md "Decode time
+    /// against SOG and SPZ").
     pub mixed_margin: Option<f64>,
     /// Lossy (`CSOG`) still scenes: fit the stored colours to what the rest decodes to
     /// ([`colour_refit`]), kept only if the encoder's held-out views render closer to the
@@ -235,7 +235,8 @@ impl Default for EncoderConfig {
             mlp_weights: WeightType::F32,
             residual: ResidualConfig::default(),
             lang_decoder: None,
-            // f16 halves the chunk; the relevance it changes is measured in BENCHMARKS.md.
+            // f16 halves the chunk; the relevance it changes is measured in
+            // docs/benchmarks/queries.md.
             lang_decoder_weights: WeightType::F16,
             canonical_orientation: true,
             reallocate_bits: 0,

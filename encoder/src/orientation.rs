@@ -4,9 +4,9 @@
 //! not matter for scales). Picking, per Gaussian, the representative whose rotation is closest
 //! to the identity leaves every Gaussian exactly as it renders and shrinks the spread of the
 //! stored quaternions: on the real scenes the smallest-three rotation channels lose 2-4 bits per
-//! Gaussian of entropy (BENCHMARKS.md "Canonical compression"). A sphere (three equal scales)
+//! Gaussian of entropy (docs/benchmarks/canonical.md). A sphere (three equal scales)
 //! is the same ellipsoid under every rotation and is stored with the identity (gsplat's are a
-//! fifth of it, the wave sequence's Gaussians all; BENCHMARKS.md "Spheres").
+//! fifth of it, the wave sequence's Gaussians all; docs/benchmarks/canonical-levers.md "Spheres").
 //!
 //! Only for Gaussians whose rotation and scales nothing else refers to: the static set of a
 //! scene without residual GOPs. Deformation decoders and residual fields add offsets to the

@@ -2,14 +2,15 @@
 //!
 //! The presets and importance tiers trade bytes for quality differently on every scene: the
 //! smallest file at SOG's PSNR was `high` with two tiers on lod3, `medium` with two finer ones on
-//! lod2 (BENCHMARKS.md "Where we are"), found by hand. This codes the scene with each preset
+//! lod2 (docs/benchmarks/canonical.md "Where we are"), found by hand. This codes the scene with
+//! each preset
 //! under each of a fixed list of tier fractions, decodes every candidate for real and renders
 //! it, and keeps the smallest whose PSNR reaches the target.
 //!
 //! Quality is measured from cameras of the search's own ([`search_views`]: 12 views at 5 and 35
 //! degrees elevation), not the 8 views of `dlgs compare` (20 degrees; same image size), so
 //! benchmark numbers are not fitted to their cameras; the two disagree by a fraction of a dB
-//! either way (BENCHMARKS.md "Target PSNR").
+//! either way (docs/benchmarks/canonical-levers.md "Target PSNR").
 
 use std::io::Cursor;
 use std::sync::Arc;
@@ -110,7 +111,8 @@ const ROTATIONS: &str = "rotations";
 /// octree positions: a larger factor stores more small Gaussians' rotations coarser. Real lod1
 /// at its `--target-psnr 48.63` bits and tiers: 0 124,405 B at 48.83 dB, 1 (the default)
 /// 120,143 B at 48.63, 1.5 117,542 B at 48.25, 2 115,658 B at 47.80, 3 112,714 B at 46.62
-/// (BENCHMARKS.md "Target PSNR"): a cheaper trade per byte than a bit of most groups.
+/// (docs/benchmarks/canonical-levers.md "Target PSNR"): a cheaper trade per byte than a bit of
+/// most groups.
 pub const ROTATION_FACTORS: [f32; 5] = [0.0, 1.0, 1.5, 2.0, 3.0];
 
 /// The level-shaping tolerances tried (`--shape`), on scenes that store SH bands above the DC
@@ -122,7 +124,8 @@ pub const SHAPE_LEVELS: [f64; 5] = [0.0, 0.01, 0.03, 0.1, 0.3];
 /// With `--refit-colours`: at the end, this many of the candidates below the target that are
 /// smaller than the best (the highest PSNR first) are coded again with the colour refit, which
 /// lifts some over the target (real lod2 at its goal-row options: 48.41 -> 48.69 dB on the
-/// benchmark's views for 29 bytes more; BENCHMARKS.md "Colour refit"); each costs two codings and
+/// benchmark's views for 29 bytes more; docs/benchmarks/canonical-levers.md "Colour refit");
+/// each costs two codings and
 /// the fit.
 pub const REFIT_TRIES: usize = 4;
 
@@ -163,7 +166,7 @@ fn search_views_sized(g: &Gaussians, (width, height): (u32, u32)) -> Vec<Camera>
 /// views the search never measures, so the user sees how its choice holds elsewhere. The
 /// smallest file that clears a target on some views is, by selection, lucky on them: on the
 /// real scenes these views land 0.01-0.14 dB under the target in four of nine cases
-/// (BENCHMARKS.md "Target PSNR").
+/// (docs/benchmarks/canonical-levers.md "Target PSNR").
 pub fn compare_views_psnr(g: &Gaussians, file: &[u8]) -> Result<f64> {
     let cams = orbit_cameras(g, &OrbitSpec::default());
     let reference = bit_allocation::render_views(g, &cams)?;

@@ -6,7 +6,7 @@
 //! level. Because the decoder's input is only 3-dimensional, the default evaluates the decoder
 //! once on a regular grid over the features' bounding box and interpolates the cosines
 //! trilinearly ([`Precision::Table`]); [`Precision::Exact`] decodes every distinct feature.
-//! BENCHMARKS.md gives both costs and the difference they make.
+//! docs/benchmarks/queries.md gives both costs and the difference they make.
 
 use dlgs::model::lang_decoder::LangDecoder;
 use rayon::prelude::*;
@@ -32,7 +32,7 @@ impl Default for Precision {
     }
 }
 
-/// Default grid size per axis (measured in BENCHMARKS.md).
+/// Default grid size per axis (measured in docs/benchmarks/queries.md).
 pub const DEFAULT_TABLE: usize = 48;
 
 /// The reference's softmax temperature.

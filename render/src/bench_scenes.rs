@@ -24,7 +24,8 @@ pub fn plant() -> Gaussians {
 
 /// 272,920 Gaussians: the plant twice side by side (x offset 0.6) plus the 45,624-Gaussian
 /// donut scaled into the gap, all at SH 0. The second plant is an exact repeat of the first
-/// (moved only), which SOG codes for 70 % of the first copy's bytes (dlgs: 91 %; BENCHMARKS.md):
+/// (moved only), which SOG codes for 70 % of the first copy's bytes (dlgs: 91 %;
+/// docs/benchmarks/canonical-large.md "A larger scene built from the real ones"):
 /// [`mosaic`] has no repeats.
 pub fn big() -> Gaussians {
     big_with_copy_order(false)
@@ -32,8 +33,9 @@ pub fn big() -> Gaussians {
 
 /// The same 272,920 Gaussians as [`big`], with the second plant's Gaussians in a fixed shuffled
 /// order. The scene renders the same, but no byte-level coder can match the second copy's
-/// attribute runs against the first's: SPZ v4's zstd streams do (BENCHMARKS.md "The 273k
-/// scene's repeat and SPZ"), our coder sorts every scene into an order of its own anyway.
+/// attribute runs against the first's: SPZ v4's zstd streams do
+/// (docs/benchmarks/canonical-large.md "The 273k scene's repeat and SPZ"), our coder sorts every
+/// scene into an order of its own anyway.
 pub fn big_copy_shuffled() -> Gaussians {
     big_with_copy_order(true)
 }

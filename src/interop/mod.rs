@@ -1,4 +1,8 @@
 //! Readers and writers of the splat formats people already have (not part of `.dlgs`).
+//!
+//! The readers of `.splat` and SOG take logarithms and exponentials with the platform's libm
+//! (not part of the `.dlgs` decode, whose floats are fixed by format-spec Appendix B): the SOG
+//! reader so that it matches splat-transform's own decode bit for bit, tested on glibc.
 
 pub mod ply;
 pub mod sog;

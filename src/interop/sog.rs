@@ -17,6 +17,7 @@
 //! (a label past the palette, a quaternion tag outside 252..=255, a texture smaller than the
 //! count) is an error naming the texture and the Gaussian, where splat-transform substitutes
 //! zeros or the identity. SOG version 1 (no `version` in `meta.json`) is not read.
+#![allow(clippy::disallowed_methods)] // a foreign format: see the module doc of `interop`
 
 use std::io::Read;
 use std::path::Path;

@@ -1,5 +1,6 @@
 //! antimatter15 `.splat`: 32 bytes per Gaussian, SH degree 0, no header.
 //! position f32x3 | linear scale f32x3 | RGBA u8x4 | quaternion u8x4 (w, x, y, z; q*128+128).
+#![allow(clippy::disallowed_methods)] // a foreign format: see the module doc of `interop`
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::Gaussians;

@@ -93,6 +93,7 @@ fn rub_quaternion(wxyz: [f32; 4]) -> [f32; 4] {
     [x, -y, -z, w]
 }
 
+#[allow(clippy::disallowed_methods)] // writing SPZ (encoder side)
 pub fn write_spz(g: &Gaussians, version: SpzVersion) -> Result<Vec<u8>> {
     g.check_shapes()?;
     g.check_finite()?;
@@ -159,6 +160,7 @@ pub fn write_spz(g: &Gaussians, version: SpzVersion) -> Result<Vec<u8>> {
 }
 
 #[cfg(test)]
+#[allow(clippy::disallowed_methods)] // the platform libm as a reference or test data
 mod tests {
     use super::*;
     use crate::interop::spz::read_spz;

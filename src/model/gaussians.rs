@@ -7,6 +7,7 @@ use crate::error::{Error, ErrorKind, Result};
 /// Number of SH coefficients per colour channel for `degree` (1, 4, 9, 16).
 /// A stored (pre-activation) opacity as the opacity compositing uses: `1 / (1 + e^-x)`.
 #[inline]
+#[allow(clippy::disallowed_methods)] // for renderers and exporters, not decoded data
 pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }

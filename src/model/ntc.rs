@@ -201,7 +201,8 @@ struct Tables {
     gate_words: Vec<u64>,
 }
 
-/// The gate at `u`: sigmoid of the interpolated gate bit, in f64 then rounded (portable).
+/// The gate at `u`: sigmoid of the interpolated gate bit, in f64 with the crate's own `exp`
+/// (Appendix B), then rounded: the same bits on every platform.
 fn gate_value(t: &Tables, c: &NtcConfig, u: [f32; 3]) -> f32 {
     let mut gv = 0f32;
     let gsum = lookup::<3>(u, c.gate_resolution, c.gate_table(), |i, w| {
@@ -211,7 +212,7 @@ fn gate_value(t: &Tables, c: &NtcConfig, u: [f32; 3]) -> f32 {
             -1.0
         }
     });
-    (1.0 / (1.0 + (-((gv / gsum) as f64)).exp())) as f32
+    crate::elementary::sigmoid_f32(gv / gsum)
 }
 
 impl NtcField {

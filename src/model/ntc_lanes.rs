@@ -148,7 +148,7 @@ fn gate_lanes(c: &NtcConfig, words: &[u64], u: &[[f32; LANES]; 3]) -> [f32; LANE
     let mut gate = [0f32; LANES];
     for l in 0..LANES {
         let s = wsum[l] + WEIGHT_EPS;
-        gate[l] = (1.0 / (1.0 + (-((gv[l] / s) as f64)).exp())) as f32;
+        gate[l] = crate::elementary::sigmoid_f32(gv[l] / s);
     }
     gate
 }

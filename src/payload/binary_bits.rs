@@ -52,6 +52,7 @@ pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
 }
 
 /// Shannon bound `n * H(ones / n)` in bits.
+#[allow(clippy::disallowed_methods)] // an encoder report, not decoded data
 pub fn entropy_bits(ones: u64, n: u64) -> f64 {
     if ones == 0 || ones == n {
         return 0.0;

@@ -136,6 +136,7 @@ impl<const N: usize> Mixer<N> {
 }
 
 #[cfg(test)]
+#[allow(clippy::disallowed_methods)] // the platform libm as a reference or test data
 mod tests {
     use super::*;
 

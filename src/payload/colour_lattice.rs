@@ -3,7 +3,8 @@
 //! quantiser's levels fall between those colours and every value moves by up to half a step;
 //! on a range whose levels are the colours themselves (or every `m`-th of them, at fewer bits
 //! than the colours' spread needs) the values keep their colour, for the same number of levels.
-//! The plant's goal row: 0.9 % fewer bytes and +0.16 dB (BENCHMARKS.md "Colour lattice").
+//! The plant's goal row: 0.9 % fewer bytes and +0.16 dB
+//! (docs/benchmarks/canonical-levers.md "Colour lattice").
 
 use crate::interop::splat::{colour_to_dc as dc, SH_C0};
 

@@ -491,7 +491,7 @@ pub const MIXED_MARGIN: f64 = 0.01;
 /// the channel before it, for codec 5 mode 6) and by `mixed_margin` (a fraction, usually
 /// [`MIXED_MARGIN`]) the others. With `mixed_margin` `None`, codec 5's mixed modes (5 and 6)
 /// are not tried: the file decodes faster for a few percent more bytes (`dlgs encode
-/// --fast-decode`, BENCHMARKS.md "Mixed contexts").
+/// --fast-decode`, docs/benchmarks/canonical-levers.md "Mixed contexts").
 pub fn encode_best(
     q: &[u16],
     prev: Previous,
@@ -604,6 +604,7 @@ pub fn undo_delta(d: &mut [u16], prev: &[u16], bits: u8) {
 }
 
 #[cfg(test)]
+#[allow(clippy::disallowed_methods)] // the platform libm as a reference or test data
 mod tests {
     use super::*;
 

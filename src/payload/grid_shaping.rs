@@ -55,6 +55,7 @@ impl Cells<'_> {
 }
 
 /// Bits of `-log2(count / total)`, with every count at least one half.
+#[allow(clippy::disallowed_methods)] // encoder-side cost estimate
 fn bits_of(count: u64, total: u64) -> f32 {
     ((total as f64).max(1.0) / (count as f64).max(0.5)).log2() as f32
 }

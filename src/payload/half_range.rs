@@ -9,7 +9,8 @@ use half::f16;
 
 /// Largest widening, as a fraction of the range, that [`snap`] accepts: the step grows by the
 /// same fraction, the channel's squared error by twice it (at most 0.034 dB were that channel
-/// all the error; measured on real scenes in BENCHMARKS.md "Compact records").
+/// all the error; measured on real scenes in docs/benchmarks/canonical-levers.md
+/// "Compact records").
 pub const MAX_WIDENING: f64 = 1.0 / 256.0;
 
 /// Whether `v` is exactly a finite binary16 value.

@@ -446,6 +446,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
 }
 
 #[cfg(test)]
+#[allow(clippy::disallowed_methods)] // the platform libm as a reference or test data
 mod tests {
     use super::*;
 

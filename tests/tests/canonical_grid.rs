@@ -380,7 +380,8 @@ fn real_scenes_pick_the_smallest_codec_per_channel() {
 fn the_adaptive_codec_shrinks_real_scenes_and_decodes_exactly() {
     // Every channel of two real scenes at `high` in the k-d layout, coded with the best of all
     // codecs and with the best of codecs 0-4 (format 1.8). Measured with
-    // `bash scripts/grid_candidates.sh` (BENCHMARKS.md "Grid coder candidates"): gsplat 12.4 %
+    // `bash experiments/canonical/grid_candidates.sh` (docs/benchmarks/canonical-levers.md
+    // "Grid coder candidates"): gsplat 12.4 %
     // smaller, donut 3.2 % (its colour channels by 15 %).
     for (scene, at_most) in [
         ("ply/gsplat_DATA_new_22589_sh3.ply", 0.90),
@@ -1515,7 +1516,8 @@ fn lod3_refit_case() -> (Gaussians, EncoderConfig) {
 fn colour_refit_keeps_the_geometry_and_renders_closer_on_a_real_scene() {
     // Real lod3 tile (1,971 Gaussians): the refit colours absorb part of the error of the
     // quantised geometry. Measured by `dlgs compare` (8 views, format 1.12) with the goal
-    // row's options plus `--refit-colours`: see BENCHMARKS.md "Colour refit".
+    // row's options plus `--refit-colours`: see docs/benchmarks/canonical-levers.md
+    // "Colour refit".
     let (g, cfg) = lod3_refit_case();
     let (plain, dp, refit, dr, report) = plain_and_refit(&g, cfg.clone());
     assert!(report.kept, "{report:?}");
@@ -1600,7 +1602,8 @@ fn opacity_refit(
 fn opacity_refit_moves_only_opacities_and_colours_and_renders_closer_on_a_real_scene() {
     // Real lod3 tile, the colour refit test's options: with the opacities searched first on
     // their levels, the unseen orbit views come closer than with the colours alone.
-    // Measured on the goal row by `dlgs compare`: BENCHMARKS.md "Opacity refit".
+    // Measured on the goal row by `dlgs compare`: docs/benchmarks/canonical-levers.md
+    // "Opacity refit".
     let (g, cfg) = lod3_refit_case();
     let (_, dp, colours, dc, colour_report) = plain_and_refit(&g, cfg.clone());
     let (both, db, report) = opacity_refit(&g, cfg);

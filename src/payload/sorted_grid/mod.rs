@@ -51,14 +51,14 @@ pub struct QuantBits {
     /// SH band 1 (coefficients 1-3).
     pub sh_rest: u8,
     /// SH bands 2 and 3 (coefficients 4-15): on real scenes their effect on the image is
-    /// scene-dependent and mostly small (BENCHMARKS.md "SH bands").
+    /// scene-dependent and mostly small (docs/benchmarks/canonical-levers.md "SH bands").
     pub sh_high: u8,
     pub lang: u8,
 }
 
 impl QuantBits {
     /// Renders within ~65 dB of the unquantised model (measured on the reference-run fixture,
-    /// BENCHMARKS.md "Ingest"): for re-packing trained models at a fraction of their bytes.
+    /// docs/benchmarks/ingest.md): for re-packing trained models at a fraction of their bytes.
     pub const NEAR_LOSSLESS: QuantBits = QuantBits {
         position: 16,
         log_scale: 11,

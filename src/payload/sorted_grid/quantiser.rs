@@ -14,7 +14,7 @@ pub const LOG_SCALE_SPAN: f32 = 14.0;
 /// radius ([`robust_radius`]): with the whole scene 4,000 pixels across, a pixel is about
 /// e^-7.6 R, so the floor is a twentieth of a pixel there, while the quantisation step shrinks
 /// by the span it no longer covers (on the real lod2 tile at `medium`: 48.8 dB instead of 46.9
-/// for 0.3 % fewer bytes; BENCHMARKS.md).
+/// for 0.3 % fewer bytes; docs/benchmarks/canonical.md "Earlier changes").
 pub const LOG_SCALE_BELOW_RADIUS: f32 = 10.0;
 
 /// 80th percentile of the distances of the finite positions from their per-axis median
@@ -53,6 +53,7 @@ pub fn robust_radius(positions: &[[f32; 3]]) -> Option<f32> {
 /// or zero-on-level one is then widened to binary16 ends where that coarsens its step by at most
 /// a 256th and moves each end by under half a step ([`half_range::snap`]): layout 4 stores such
 /// a range in half the bytes (§6.5.7).
+#[allow(clippy::disallowed_methods)] // encoder-side range choice
 pub(super) fn range(k: Kind, v: &[f32], radius: Option<f32>, bits: u8) -> (f32, f32) {
     let min_max = || {
         v.iter()
@@ -100,7 +101,8 @@ pub(super) fn range(k: Kind, v: &[f32], radius: Option<f32>, bits: u8) -> (f32, 
 /// data's min and max zero falls between two levels, shifting every such coefficient by up to
 /// half a step. The encoder keeps this range only where it is the cheaper one
 /// ([`cheaper_range`]): real gsplat at `low`, 7 % fewer bytes at the same PSNR; fruit at its
-/// presets, no change (BENCHMARKS.md "SH bands"). Ranges not around zero, and 1-bit channels,
+/// presets, no change (docs/benchmarks/canonical-levers.md "SH bands"). Ranges not around zero,
+/// and 1-bit channels,
 /// are returned as they are.
 fn zero_on_level(lo: f32, hi: f32, bits: u8) -> (f32, f32) {
     let l = levels(bits);
@@ -137,6 +139,7 @@ fn zero_on_level(lo: f32, hi: f32, bits: u8) -> (f32, f32) {
 /// Of two ranges, the one with the lower estimated rate-distortion cost for `v` (ties: `a`):
 /// squared error plus `λ` times the order-0 entropy of the levels, `λ = 2 ln 2 / 12 · step²`
 /// (the slope of uniform quantisation at high rate: one bit more quarters the error `step²/12`).
+#[allow(clippy::disallowed_methods)] // encoder-side cost estimate
 fn cheaper_range(v: &[f32], a: (f32, f32), b: (f32, f32), bits: u8) -> (f32, f32) {
     if a == b {
         return a;
@@ -204,14 +207,15 @@ pub fn grid_width(n: usize) -> usize {
 }
 
 /// Back to pre-sigmoid opacity; alpha is kept half a step away from 0 and 1 so the logit is
-/// finite (§6.5.2).
+/// finite (§6.5.2). `a / (1 - a)` in binary32, its logarithm correctly rounded to binary32 by
+/// the crate's own [`crate::elementary::ln`] (Appendix B): the same bits on every platform.
 pub(super) fn logit(alpha: Vec<f32>, bits: u8) -> Vec<f32> {
     let eps = 0.5 / levels(bits);
     alpha
         .into_iter()
         .map(|a| {
             let a = a.clamp(eps, 1.0 - eps);
-            (a / (1.0 - a)).ln()
+            crate::elementary::ln_f32(a / (1.0 - a))
         })
         .collect()
 }
@@ -219,6 +223,47 @@ pub(super) fn logit(alpha: Vec<f32>, bits: u8) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every opacity level of every bit width decodes to the correctly rounded binary32 of
+    /// `ln(a / (1 - a))` (of the binary32 quotient), so any implementation that rounds
+    /// correctly, or follows Appendix B, gives the same bits: the binary64 logarithm is
+    /// farther than 16 of its ulps from every binary32 rounding boundary, and the
+    /// platform's binary64 `ln` agrees with ours within one ulp on the same inputs.
+    #[test]
+    #[allow(clippy::disallowed_methods)] // the platform's `ln` as an independent reference
+    fn opacity_levels_are_correctly_rounded_at_every_bit_width() {
+        let mut checked = 0;
+        for bits in 1..=16u8 {
+            let q: Vec<u16> = (0..=levels(bits) as u32).map(|q| q as u16).collect();
+            let alpha: Vec<f32> = q.iter().map(|&q| dequantise(q, 0.0, 1.0, bits)).collect();
+            let ours = logit(alpha.clone(), bits);
+            let eps = 0.5 / levels(bits);
+            for (a, v) in alpha.into_iter().zip(ours) {
+                let a = a.clamp(eps, 1.0 - eps);
+                let x = (a / (1.0 - a)) as f64;
+                let y = crate::elementary::ln(x);
+                assert!(y.to_bits().abs_diff(x.ln().to_bits()) <= 1, "ln({x})");
+                assert_eq!(v, y as f32);
+                if v == 0.0 {
+                    continue; // ln(1) = 0 exactly
+                }
+                // The neighbours of v towards y and the rounding boundary between them.
+                let up = if (y > v as f64) == (v > 0.0) {
+                    f32::from_bits(v.to_bits() + 1)
+                } else {
+                    f32::from_bits(v.to_bits() - 1)
+                };
+                let boundary = (v as f64 + up as f64) / 2.0;
+                let ulp = f64::from_bits(y.abs().to_bits() + 1) - y.abs();
+                assert!(
+                    (y - boundary).abs() > 16.0 * ulp,
+                    "{bits}-bit level of alpha {a}: ln too close to a rounding boundary"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 130_000);
+    }
 
     #[test]
     fn robust_radius_of_degenerate_sets() {

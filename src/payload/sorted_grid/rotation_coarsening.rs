@@ -33,7 +33,8 @@ pub struct RotationCoarsening {
 
 impl RotationCoarsening {
     /// The reference encoder's default (`dlgs encode` without `--coarse-rotations`): on the
-    /// real SH 0 scenes and gsplat 1-4 % fewer bytes for 0.00-0.33 dB (BENCHMARKS.md).
+    /// real SH 0 scenes and gsplat 1-4 % fewer bytes for 0.00-0.33 dB
+    /// (docs/benchmarks/canonical-levers.md "Coarse rotations").
     pub const DEFAULT: RotationCoarsening = RotationCoarsening {
         factor: 1.0,
         max_shift: 4,
@@ -43,6 +44,7 @@ impl RotationCoarsening {
 /// The stored (max shift, threshold) of a set whose channels hold `chans` (positions
 /// quantised): `exp(threshold)` is the largest scale whose one-step turn moves its surface by
 /// `factor` position steps. Shift 0 (no coarsening) when that is not finite.
+#[allow(clippy::disallowed_methods)] // encoder-side: the threshold is stored
 pub(super) fn coarsening_record(
     chans: &[(u8, f32, f32, Vec<u16>)],
     c: RotationCoarsening,

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Probe (BENCHMARKS.md "Probes, 2026-11-26"): could a lone point's low position bits be predicted?
+"""Probe (docs/benchmarks/canonical-probes.md "Probes toward half of SPZ (2026-11-26, not kept)"): could a lone point's low position bits be predicted?
 
 The octree (format-spec section 6.5.5) isolates each point after a few levels and codes the rest of
 its bits as uniform symbols. This estimates what a model built from the points decoded before it
@@ -11,7 +11,7 @@ could save, with two density models truncated to the lone point's octree cell:
 each mixed with a uniform share eps over the cell. Cost: -log2 of the point's voxel's probability.
 Exact duplicates (a voxel holding several points) are left out; the real coder counts them apart.
 
-Usage: python3 scripts/octree_low_bits_probe.py SCENE.ply|SCENE.splat BITS [SAMPLE]
+Usage: python3 experiments/canonical/octree_low_bits_probe.py SCENE.ply|SCENE.splat BITS [SAMPLE]
 Needs numpy and scipy (pip install numpy scipy). About 30 s on a 45k scene.
 """
 import sys

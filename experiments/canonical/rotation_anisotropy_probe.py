@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Probe (BENCHMARKS.md "Probes toward half of SPZ (2026-11-26, later)"): would coarse rotations
+"""Probe (docs/benchmarks/canonical-probes.md "Probes toward half of SPZ (2026-11-26, later; not kept)"): would coarse rotations
 (format-spec §6.5.6) save more if they followed a Gaussian's anisotropy instead of its size?
 
 Turning a Gaussian by a small angle changes its ellipsoid by about the angle times the largest
@@ -8,7 +8,7 @@ For the drawn Gaussians (opacity >= 1/255) of an INRIA PLY, prints the mean shif
 with `m = log(s_max)` (the format's) and with `m = log(s_max - s_min)`, the rotation bits the
 second would save (one bit per halving in each of the three stored components), and quantiles
 of the scale ratios (how many Gaussians are near spheres or spheroids).
-Usage: python3 scripts/rotation_anisotropy_probe.py SCENE.ply POSITION_BITS ROTATION_BITS FACTOR
+Usage: python3 experiments/canonical/rotation_anisotropy_probe.py SCENE.ply POSITION_BITS ROTATION_BITS FACTOR
 """
 import sys
 

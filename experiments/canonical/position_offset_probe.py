@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""Probe (BENCHMARKS.md "Probes toward half of SPZ (2026-11-26)"): does a position grid shifted
+"""Probe (docs/benchmarks/canonical-probes.md "Probes toward half of SPZ (2026-11-26, not kept)"): does a position grid shifted
 by a fraction of a step break depth ties the same way on every set of views?
 
 Quantises only the positions of an INRIA PLY (float properties only) at BITS per axis on a grid
 whose origin is shifted by (dx, dy, dz) steps, every other attribute exact, and prints the mean
 PSNR of `dlgs compare` on four view sets for each shift.
-Usage: python3 scripts/position_offset_probe.py SCENE.ply [BITS]   (needs numpy and a release build)
+Usage: python3 experiments/canonical/position_offset_probe.py SCENE.ply [BITS]   (needs numpy and a release build)
 """
 import json
 import os
@@ -21,7 +21,7 @@ VIEW_SETS = [("benchmark orbit, 32 views", ["--orbit", "32"]),
              ("up x, 16", ["--orbit", "16", "--up", "x"]),
              ("up z, 16", ["--orbit", "16", "--up", "z"]),
              ("distance 2.5, 16", ["--orbit", "16", "--distance", "2.5"])]
-DLGS = os.path.join(os.path.dirname(__file__), "..", "target", "release", "dlgs")
+DLGS = os.path.join(os.path.dirname(__file__), "..", "..", "target", "release", "dlgs")
 
 
 def read_ply(path):

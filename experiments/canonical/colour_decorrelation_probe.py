@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""Probe (BENCHMARKS.md "What half of SPZ would take"): how many bits per Gaussian would a
+"""Probe (docs/benchmarks/canonical.md "What half of SPZ would take"): how many bits per Gaussian would a
 colour transform save on SH DC (and the same on log-scales)? Order-0 entropy estimates from an
 INRIA PLY, each channel quantised to BITS on its own range (as the coder does), against:
 the channels alone; each given the previous channel's top 2 or 4 bits (like codec 5's contexts);
 G, R-G, B-G on one shared range; and the same with G's top 3 bits (and R-G) as context.
 Model costs are ignored, so these are lower than what an adaptive coder reaches.
-Usage: python3 scripts/colour_decorrelation_probe.py SCENE.ply:BITS [SCENE.ply:BITS ...]
+Usage: python3 experiments/canonical/colour_decorrelation_probe.py SCENE.ply:BITS [SCENE.ply:BITS ...]
 """
 import sys
 

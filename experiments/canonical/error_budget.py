@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Which attribute's quantisation costs how much PSNR in a lossy .dlgs file.
 
-Usage: python3 scripts/error_budget.py SOURCE.ply CODED.dlgs [--views 8]
+Usage: python3 experiments/canonical/error_budget.py SOURCE.ply CODED.dlgs [--views 8]
 (needs numpy and scipy: `pip install numpy scipy`; builds nothing, runs target/release/dlgs).
 
 Decodes CODED.dlgs to a PLY, matches every decoded Gaussian to its source Gaussian (nearest
@@ -66,7 +66,7 @@ def main():
     if len(args) != 2:
         sys.exit(__doc__)
     source, coded = args
-    dlgs = os.path.join(os.path.dirname(__file__), "..", "target", "release", "dlgs")
+    dlgs = os.path.join(os.path.dirname(__file__), "..", "..", "target", "release", "dlgs")
     with tempfile.TemporaryDirectory() as tmp:
         decoded = os.path.join(tmp, "decoded.ply")
         subprocess.run([dlgs, "decode", coded, "-o", decoded], check=True, capture_output=True)

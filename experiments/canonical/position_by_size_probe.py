@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Probe (BENCHMARKS.md "Probes toward half of SPZ (2026-11-26, later)"): should a Gaussian's
+"""Probe (docs/benchmarks/canonical-probes.md "Probes toward half of SPZ (2026-11-26, later; not kept)"): should a Gaussian's
 position precision follow its size?
 
 Quantises only the positions of an INRIA PLY (float properties only; every other attribute
@@ -8,7 +8,7 @@ exact) on the scene's min/max grid, with per-Gaussian bits per axis
 A > 0 gives large Gaussians finer positions, A < 0 coarser, A = 0 is uniform at BASE bits.
 Prints the mean bits over the drawn Gaussians (opacity >= 1/255) and the mean PSNR of
 `dlgs compare` (the benchmark's orbit, ORBIT views, default 8).
-Usage: ORBIT=32 python3 scripts/position_by_size_probe.py SCENE.ply BASE:A [BASE:A ...]
+Usage: ORBIT=32 python3 experiments/canonical/position_by_size_probe.py SCENE.ply BASE:A [BASE:A ...]
 (needs numpy and a release build)
 """
 import json

@@ -8,7 +8,7 @@ codec 5), zstd -19, PNG (level 9, 8- or
 are split into a high-byte and a low-byte image as PlayCanvas SOG does for positions), lossless
 WebP with the group's channels in one RGB(A) image (SOG's packing, cross-channel transforms
 allowed), and lossless JPEG XL (effort 9, per channel and grouped).
-Needs numpy and imagecodecs (PyPI). Usage: python3 scripts/grid_candidates.py OUT_DIR
+Needs numpy and imagecodecs (PyPI). Usage: python3 experiments/canonical/grid_candidates.py OUT_DIR
 """
 
 import json

@@ -1,0 +1,138 @@
+//! The seam between deformation and the HEVC decoder of the time features (`TFEA` codecs 1-3).
+//!
+//! Time features are 12-bit monochrome HEVC pictures (format-spec §6.2). The decoder does not
+//! care who decodes them: with the default cargo feature `hevc` it is FFmpeg (crate
+//! `dlgs-video`, GPL because of libx265 in Debian's FFmpeg build); without it, nothing links
+//! FFmpeg and a player plugs in its own decoder (an LGPL FFmpeg, a hardware decoder, ...) with
+//! [`crate::Decoder::set_key_picture_decoder`]. Files with exact time features (`TFEA` codec 0)
+//! and still files need no HEVC decoder at all.
+
+use std::sync::Arc;
+
+/// Decodes HEVC Main 12 4:0:0 access units into 12-bit gray pictures.
+///
+/// HEVC decoding is exactly specified, so every conforming decoder gives the same samples and
+/// the decoded frames keep their bits whatever implementation is plugged in.
+pub trait KeyPictureDecoder: Send + Sync {
+    /// Decode `packets` (one access unit each, in decode order: the `TFEA` packets of one
+    /// stream, or one intra packet) into exactly `expect` pictures of `width` x `height`
+    /// samples (values 0..=4095, row-major, in output order).
+    fn decode(
+        &self,
+        packets: &[&[u8]],
+        width: u32,
+        height: u32,
+        expect: usize,
+    ) -> Result<Vec<Vec<u16>>, String>;
+}
+
+/// The shared handle the decoder keeps.
+pub type SharedKeyPictureDecoder = Arc<dyn KeyPictureDecoder>;
+
+/// FFmpeg's HEVC decoder through `dlgs-video` (feature `hevc`, on by default; GPL).
+#[cfg(feature = "hevc")]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Ffmpeg;
+
+#[cfg(feature = "hevc")]
+impl KeyPictureDecoder for Ffmpeg {
+    fn decode(
+        &self,
+        packets: &[&[u8]],
+        width: u32,
+        height: u32,
+        expect: usize,
+    ) -> Result<Vec<Vec<u16>>, String> {
+        dlgs_video::decode_gray12(packets, width, height, expect)
+            .map(|v| v.frames)
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// The decoder a new [`crate::Decoder`] starts with: FFmpeg with the `hevc` feature, none
+/// without it.
+pub fn default_decoder() -> Option<SharedKeyPictureDecoder> {
+    #[cfg(feature = "hevc")]
+    return Some(Arc::new(Ffmpeg));
+    #[cfg(not(feature = "hevc"))]
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Cursor;
+
+    use dlgs::{ErrorKind, Limits};
+
+    use crate::{Decoder, FrameOptions};
+
+    fn open(name: &str) -> Decoder<Cursor<Vec<u8>>> {
+        let path = format!(
+            "{}/../format-spec/vectors/valid/{name}.dlgs",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        Decoder::new(Cursor::new(bytes), Limits::default()).unwrap()
+    }
+
+    const OPTS: FrameOptions = FrameOptions {
+        camera_center: [0.3, -0.2, -2.5],
+        language: true,
+    };
+
+    /// With or without the `hevc` feature: exact time features and still files decode.
+    #[test]
+    fn exact_feature_and_still_files_decode_with_or_without_hevc() {
+        let mut d = open("lod3-dynamic");
+        let (a, b) = (
+            d.frame_at(0.5, &OPTS).unwrap(),
+            d.frame_at(2.0, &OPTS).unwrap(),
+        );
+        assert_eq!(a.dynamics.len(), 128);
+        assert_ne!(a.dynamics.positions, b.dynamics.positions, "frames move");
+        let mut s = open("lod3-csog-compact");
+        assert_eq!(s.frame_at(0.0, &OPTS).unwrap().merged().len(), 1971);
+    }
+
+    /// Without the feature, HEVC time features are a typed error naming what is missing.
+    #[cfg(not(feature = "hevc"))]
+    #[test]
+    fn hevc_features_without_a_decoder_are_a_typed_error() {
+        let mut d = open("lod3-dynamic-intra");
+        let e = d.frame_at(0.5, &OPTS).err().expect("no HEVC decoder");
+        assert_eq!(e.kind, ErrorKind::NoHevcDecoder, "{e}");
+        assert!(e.offset > 0, "the TFEA payload's offset");
+    }
+
+    /// A plugged-in decoder is the one used, and gives the same frames as FFmpeg.
+    #[cfg(feature = "hevc")]
+    #[test]
+    fn a_plugged_in_decoder_is_used() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        use std::sync::Arc;
+
+        use super::{Ffmpeg, KeyPictureDecoder};
+
+        struct Counting(AtomicUsize);
+        impl KeyPictureDecoder for Counting {
+            fn decode(
+                &self,
+                p: &[&[u8]],
+                w: u32,
+                h: u32,
+                n: usize,
+            ) -> Result<Vec<Vec<u16>>, String> {
+                self.0.fetch_add(1, Ordering::SeqCst);
+                Ffmpeg.decode(p, w, h, n)
+            }
+        }
+        let want = open("lod3-dynamic-intra").frame_at(1.2345, &OPTS).unwrap();
+        let counting = Arc::new(Counting(AtomicUsize::new(0)));
+        let mut d = open("lod3-dynamic-intra");
+        d.set_key_picture_decoder(counting.clone());
+        let got = d.frame_at(1.2345, &OPTS).unwrap();
+        assert_eq!(got.dynamics.positions, want.dynamics.positions);
+        assert!(counting.0.load(Ordering::SeqCst) >= 2, "two keys around t");
+        let _ = ErrorKind::NoHevcDecoder; // the kind a build without the feature reports
+    }
+}

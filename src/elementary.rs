@@ -1,0 +1,239 @@
+//! Deterministic elementary functions (format-spec Appendix B).
+//!
+//! The decoder must give the same floats on every machine, but `f32::ln`, `f64::exp`,
+//! `f32::sin` and `f32::acos` call the platform's C library, whose results differ in the last
+//! bit between glibc, musl, macOS and Windows. These functions use only IEEE 754 binary64
+//! addition, subtraction, multiplication, division, comparisons and exact bit manipulation,
+//! in the order written here (Rust never fuses `a * b + c`), so every conforming platform
+//! computes the same bits. The spec writes out the same algorithms step by step.
+//!
+//! Accuracy: `ln` and `exp` are within about one binary64 ulp; the binary32 results the
+//! decoder uses are correctly rounded on every input the format produces where that is
+//! checkable (every opacity level of every bit width: `tests` below). `sin` and `acos` are
+//! within a few binary64 ulps on the ranges the deformation uses.
+
+/// `ln 2` split so that `k * LN2_HI` is exact for `|k| < 2^20` (the low 32 bits are zero).
+const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+/// `π/2` split so that `k * PIO2_HI` is exact for `|k| < 2^20` (33 significant bits).
+const PIO2_HI: f64 = f64::from_bits(0x3ff9_21fb_5440_0000);
+const PIO2_LO: f64 = f64::from_bits(0x3dd0_b461_1a62_6331);
+const SQRT2: f64 = std::f64::consts::SQRT_2;
+
+/// Terms of the `ln` series: `R(z) = sum_{k=1..=12} 2/(2k+1) z^k`.
+const LN_TERMS: usize = 12;
+/// Degree of the `exp` Taylor polynomial.
+const EXP_DEGREE: usize = 13;
+/// `asin` series terms (`z <= 1/4`).
+const ASIN_TERMS: usize = 27;
+
+/// Natural logarithm, binary64. `ln(0) = -inf`, `ln(+inf) = +inf`, negative or NaN: NaN.
+pub fn ln(x: f64) -> f64 {
+    if x.is_nan() || x < 0.0 {
+        return f64::NAN;
+    }
+    if x == 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    if x == f64::INFINITY {
+        return x;
+    }
+    let (mut x, mut e) = (x, 0i64);
+    if x < f64::MIN_POSITIVE {
+        // Subnormal: scale into the normal range (exact).
+        x *= f64::from_bits(0x4350_0000_0000_0000); // 2^54
+        e = -54;
+    }
+    let bits = x.to_bits();
+    e += ((bits >> 52) & 0x7ff) as i64 - 1023;
+    // m in [1, 2), exactly x's significand.
+    let mut m = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000);
+    if m > SQRT2 {
+        m *= 0.5;
+        e += 1;
+    }
+    // m in [1/√2, √2]: f = m - 1 is exact (Sterbenz).
+    let f = m - 1.0;
+    let s = f / (2.0 + f);
+    let z = s * s;
+    let mut r = 0.0;
+    for k in (1..=LN_TERMS).rev() {
+        r = (r + 2.0 / (2 * k + 1) as f64) * z;
+    }
+    let hfsq = 0.5 * f * f;
+    let dk = e as f64;
+    dk * LN2_HI - ((hfsq - (s * (hfsq + r) + dk * LN2_LO)) - f)
+}
+
+/// `e^x`, binary64. Above 709.0: +inf; below -708.0: 0 (no subnormal results); NaN: NaN.
+pub fn exp(x: f64) -> f64 {
+    if x.is_nan() {
+        return x;
+    }
+    if x > 709.0 {
+        return f64::INFINITY;
+    }
+    if x < -708.0 {
+        return 0.0;
+    }
+    // k = round(x / ln 2), ties away from zero; r = x - k ln 2 in [-0.35, 0.35].
+    let k = (x * std::f64::consts::LOG2_E).round();
+    let r = (x - k * LN2_HI) - k * LN2_LO;
+    let mut p = 0.0;
+    for j in (1..=EXP_DEGREE).rev() {
+        p = (p + 1.0 / factorial(j)) * r;
+    }
+    let p = p + 1.0;
+    // k in [-1022, 1023]: 2^k is a normal binary64.
+    p * f64::from_bits(((k as i64 + 1023) as u64) << 52)
+}
+
+/// `n!` as a binary64 (exact for `n <= 18`).
+fn factorial(n: usize) -> f64 {
+    (1..=n).fold(1.0, |a, i| a * i as f64)
+}
+
+/// `sin x`, binary64, for finite `x` (accurate for `|x| < 2^20 π/2`); non-finite: NaN.
+pub fn sin(x: f64) -> f64 {
+    if !x.is_finite() {
+        return f64::NAN;
+    }
+    let k = (x * std::f64::consts::FRAC_2_PI).round();
+    let r = (x - k * PIO2_HI) - k * PIO2_LO;
+    let z = r * r;
+    // sin r = r (1 - z/3! + z^2/5! - ...), cos r = 1 - z/2! + z^2/4! - ...; |r| <= π/4.
+    let mut ps = 0.0;
+    let mut pc = 0.0;
+    for j in (1..=8).rev() {
+        let sign = if j % 2 == 1 { -1.0 } else { 1.0 };
+        ps = (ps + sign / factorial(2 * j + 1)) * z;
+        pc = (pc + sign / factorial(2 * j)) * z;
+    }
+    let (s, c) = (r + r * ps, 1.0 + pc);
+    match (k as i64).rem_euclid(4) {
+        0 => s,
+        1 => c,
+        2 => -s,
+        _ => -c,
+    }
+}
+
+/// `asin y` for `|y| <= 1/2` by its Taylor series in `z = y^2`.
+fn asin_small(y: f64) -> f64 {
+    let z = y * y;
+    // a_n = (2n)! / (4^n (n!)^2 (2n + 1)); the product (2n-1)!!/(2n)!! built term by term.
+    let mut coeffs = [0.0; ASIN_TERMS];
+    let mut ratio = 1.0;
+    for (n, c) in coeffs.iter_mut().enumerate().skip(1) {
+        ratio = ratio * (2 * n - 1) as f64 / (2 * n) as f64;
+        *c = ratio / (2 * n + 1) as f64;
+    }
+    let mut p = 0.0;
+    for n in (1..ASIN_TERMS).rev() {
+        p = (p + coeffs[n]) * z;
+    }
+    y + y * p
+}
+
+/// `acos x` in `[0, π]`, binary64; outside `[-1, 1]` or NaN: NaN.
+pub fn acos(x: f64) -> f64 {
+    if x.is_nan() || !(-1.0..=1.0).contains(&x) {
+        return f64::NAN;
+    }
+    use std::f64::consts::{FRAC_PI_2, PI};
+    if x.abs() <= 0.5 {
+        FRAC_PI_2 - asin_small(x)
+    } else if x > 0.0 {
+        // 1 - x is exact for x in [1/2, 1] (Sterbenz); halving is exact.
+        2.0 * asin_small(((1.0 - x) * 0.5).sqrt())
+    } else {
+        PI - 2.0 * asin_small(((1.0 + x) * 0.5).sqrt())
+    }
+}
+
+/// [`ln`] of a binary32, rounded to binary32.
+pub fn ln_f32(x: f32) -> f32 {
+    ln(x as f64) as f32
+}
+
+/// [`sin`] of a binary32, rounded to binary32.
+pub fn sin_f32(x: f32) -> f32 {
+    sin(x as f64) as f32
+}
+
+/// [`acos`] of a binary32, rounded to binary32.
+pub fn acos_f32(x: f32) -> f32 {
+    acos(x as f64) as f32
+}
+
+/// The logistic function `1 / (1 + e^-v)` in binary64 with [`exp`], rounded to binary32.
+pub fn sigmoid_f32(v: f32) -> f32 {
+    (1.0 / (1.0 + exp(-(v as f64)))) as f32
+}
+
+#[cfg(test)]
+#[allow(clippy::disallowed_methods)] // the platform's functions are the accuracy reference
+mod tests {
+    use super::*;
+
+    fn ulps(a: f64, b: f64) -> u64 {
+        (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs()
+    }
+
+    #[test]
+    fn ln_matches_the_platform_within_an_ulp() {
+        let mut rng = fastrand::Rng::with_seed(7);
+        for _ in 0..200_000 {
+            let x = f64::from_bits(rng.u64(1..0x7fef_ffff_ffff_ffff));
+            assert!(ulps(ln(x), x.ln()) <= 1, "ln({x:e}) = {:e}", ln(x));
+        }
+        for x in [1.0, 2.0, 0.5, SQRT2, 1e-310, f64::MIN_POSITIVE, f64::MAX] {
+            assert!(ulps(ln(x), x.ln()) <= 1, "ln({x:e})");
+        }
+        assert_eq!(ln(1.0), 0.0);
+        assert_eq!(ln(0.0), f64::NEG_INFINITY);
+        assert!(ln(-1.0).is_nan() && ln(f64::NAN).is_nan());
+        assert_eq!(ln(f64::INFINITY), f64::INFINITY);
+    }
+
+    #[test]
+    fn exp_matches_the_platform_within_two_ulps() {
+        let mut rng = fastrand::Rng::with_seed(8);
+        for _ in 0..200_000 {
+            let x = rng.f64() * 1416.0 - 708.0;
+            assert!(ulps(exp(x), x.exp()) <= 2, "exp({x}) = {:e}", exp(x));
+        }
+        assert_eq!(exp(0.0), 1.0);
+        assert_eq!(exp(710.0), f64::INFINITY);
+        assert_eq!(exp(-709.0), 0.0);
+        assert!(exp(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn sin_and_acos_are_accurate_where_slerp_uses_them() {
+        for i in -40_000..=40_000 {
+            let x = i as f64 * 1e-4;
+            assert!((sin(x) - x.sin()).abs() <= 4e-16, "sin({x})");
+        }
+        for i in -100_000..=100_000 {
+            let x = i as f64 * 1e-5;
+            assert!((acos(x) - x.acos()).abs() <= 8e-16, "acos({x})");
+        }
+        assert_eq!(acos(1.0), 0.0);
+        assert_eq!(acos(-1.0), std::f64::consts::PI);
+        assert!(acos(1.5).is_nan() && sin(f64::INFINITY).is_nan());
+        assert_eq!(sin(0.0), 0.0);
+    }
+
+    #[test]
+    fn sigmoid_is_within_an_f32_ulp_and_saturates() {
+        for i in -20_000..=20_000 {
+            let v = i as f32 * 1e-3;
+            let want = (1.0 / (1.0 + (-(v as f64)).exp())) as f32;
+            let got = sigmoid_f32(v);
+            assert!(got.to_bits().abs_diff(want.to_bits()) <= 1, "sigmoid({v})");
+        }
+        assert_eq!(sigmoid_f32(-1e30), 0.0);
+        assert_eq!(sigmoid_f32(1e30), 1.0);
+    }
+}
