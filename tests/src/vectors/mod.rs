@@ -9,6 +9,9 @@ use dlgs::Canonical;
 
 use crate::{load, multi_gop_file, with_synthetic_language};
 
+pub mod errors;
+pub mod paths;
+
 pub struct Vector {
     pub name: &'static str,
     pub bytes: Vec<u8>,
@@ -136,6 +139,7 @@ pub fn all() -> Vec<Vector> {
         error: None,
         about: "3 sequential GOPs of 512 lod3 Gaussians: GOP 0 CRAW, GOP 1 a generated binary voxel residual field (RNTC, small grids), GOP 2 explicit residuals (RDLT: positions within 1e-4, SH DC within 2e-3, the rest exact); exact TFEA",
     });
+    v.extend(paths::all(&lod3));
     let mut bad = |name, error, about, f: &dyn Fn(&mut Vec<u8>)| {
         let mut b = base.clone();
         f(&mut b);
@@ -220,6 +224,7 @@ pub fn all() -> Vec<Vector> {
         error: Some("UnknownCriticalChunk"),
         about: "a must-understand chunk type this version does not define",
     });
+    v.extend(errors::all(&base, &tiny_c, &tiny_scene));
     v
 }
 
@@ -338,7 +343,20 @@ pub const DYNAMIC_VECTOR: &str = "lod3-dynamic";
 /// The same model with intra-only HEVC time features (`TFEA` codec 3); frames listed likewise.
 pub const INTRA_VECTOR: &str = "lod3-dynamic-intra";
 /// Vectors whose decoded frames at [`FRAME_TIMES`] are listed.
-pub const FRAME_VECTORS: [&str; 2] = [DYNAMIC_VECTOR, INTRA_VECTOR];
+pub const FRAME_VECTORS: [&str; 5] = [
+    DYNAMIC_VECTOR,
+    INTRA_VECTOR,
+    paths::LERP_VECTOR,
+    paths::HEVC_VECTOR,
+    paths::HEVC_REFERENCE_VECTOR,
+];
+/// Vectors holding libx265 output, which may differ between x265 builds: the conformance test
+/// checks their frames against the listed ones instead of their bytes against the generator's.
+pub const X265_VECTORS: [&str; 3] = [
+    INTRA_VECTOR,
+    paths::HEVC_VECTOR,
+    paths::HEVC_REFERENCE_VECTOR,
+];
 /// Times (seconds) whose frames the vector lists: a key, between keys, between frames, the
 /// first frame of GOP 1, near the end.
 pub const FRAME_TIMES: [f64; 5] = [0.0, 0.5, 1.2345, 2.0, 3.95];

@@ -1,0 +1,435 @@
+//! Valid vectors for decoding paths the encoder's own choices leave out of the other vectors:
+//! each `CSOG` grid codec and codec 5's residual modes forced on every channel (§6.5.3),
+//! `RDLT` codec 2 (§6.7), `RNTC` scope 1 (§6.6.3), deform model 1 (§6.4), `TFEA` codecs 1
+//! and 2 (§6.2). [`claims`] checks that each vector still takes its path.
+
+use dlgs::container::header::{DeformModel, ResidualMode};
+use dlgs::container::{ChunkType, FileReader, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
+use dlgs::payload::adaptive_coder::{self, Mode, Previous};
+use dlgs::payload::grid_coder::{self, GridCodec};
+use dlgs::payload::mlp_weights::WeightType;
+use dlgs::payload::sorted_grid::{self, grid_width, quantise_set, QuantBits};
+use dlgs::Gaussians;
+
+use super::Vector;
+
+/// The first `n` Gaussians of a scene.
+fn first(scene: &Gaussians, n: usize) -> Gaussians {
+    let mut part = Gaussians::new(scene.sh_degree, scene.lang_width);
+    for i in 0..n {
+        part.push_from(scene, i);
+    }
+    part
+}
+
+/// How a forced-codec vector codes one channel: (cells, previous channel, the one before it,
+/// grid width, bits) -> (codec, data).
+type Pick = fn(&[u16], Previous, Previous, usize, u8) -> (GridCodec, Vec<u8>);
+
+/// A still `CSOG` (layout 1: one static part, no dynamic parts) of `g` in grid order at `LOW`
+/// bits (every channel at most 12 bits, so codec 3's alphabet always fits), each channel coded
+/// as `pick` says rather than by the encoder's smallest-wins choice.
+fn csog_forced(g: &Gaussians, pick: Pick) -> Vec<u8> {
+    use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
+    let sorted = permute(g, &grid_order(g, SortSpec::DEFAULT));
+    let set = quantise_set(&sorted, &QuantBits::LOW).channels;
+    let (n, w) = (sorted.len(), grid_width(sorted.len()));
+    let mut p = vec![1u8, 1];
+    p.extend((n as u32).to_le_bytes());
+    p.extend((w as u32).to_le_bytes());
+    p.extend((set.len() as u16).to_le_bytes());
+    for (j, (bits, lo, hi, q)) in set.iter().enumerate() {
+        let prev = |back: usize| j.checked_sub(back).map(|k| (set[k].3.as_slice(), set[k].0));
+        let (codec, data) = pick(q, prev(1), prev(2), w, *bits);
+        p.push(*bits);
+        p.push(codec as u8);
+        p.extend(lo.to_le_bytes());
+        p.extend(hi.to_le_bytes());
+        p.extend((data.len() as u32).to_le_bytes());
+        p.extend(data);
+    }
+    // The dynamic set: no parts (n_dynamic = 0, since 1.12).
+    p.push(0);
+    let mut wr = Writer::new(Vec::new(), SceneHeader::still(n as u32, g.sh_degree)).unwrap();
+    wr.begin_gop().unwrap();
+    wr.gop_chunk(ChunkType::CSOG, FLAG_MUST_UNDERSTAND, &p)
+        .unwrap();
+    wr.finish().unwrap()
+}
+
+fn zstd(q: &[u16], _: Previous, _: Previous, _: usize, bits: u8) -> (GridCodec, Vec<u8>) {
+    (GridCodec::Zstd, grid_coder::encode_zstd(q, bits, 19))
+}
+
+fn histogram(q: &[u16], _: Previous, _: Previous, _: usize, _: u8) -> (GridCodec, Vec<u8>) {
+    let d = grid_coder::encode_histogram(q, 19).expect("at most 4096 symbols");
+    (GridCodec::Histogram, d)
+}
+
+/// Codec 4 wherever the previous channel has the same bits, else codec 3.
+fn histogram_delta(
+    q: &[u16],
+    prev: Previous,
+    p2: Previous,
+    w: usize,
+    bits: u8,
+) -> (GridCodec, Vec<u8>) {
+    match prev.filter(|p| p.1 == bits) {
+        Some((p, _)) => {
+            let d = grid_coder::encode_histogram(&grid_coder::delta(q, p, bits), 19);
+            (GridCodec::HistogramDelta, d.expect("at most 4096 symbols"))
+        }
+        None => histogram(q, prev, p2, w, bits),
+    }
+}
+
+fn adaptive(
+    q: &[u16],
+    prev: Previous,
+    p2: Previous,
+    w: usize,
+    bits: u8,
+    mode: Mode,
+) -> (GridCodec, Vec<u8>) {
+    let d = adaptive_coder::encode(q, prev, p2, w, bits, mode).expect("a usable mode");
+    (GridCodec::Adaptive, d)
+}
+
+/// Codec 5 mode 1 wherever there is a previous channel, else mode 0.
+fn mode1(q: &[u16], prev: Previous, p2: Previous, w: usize, bits: u8) -> (GridCodec, Vec<u8>) {
+    let mode = match prev {
+        Some(_) => Mode::ResidualGivenPrevious,
+        None => Mode::Residual,
+    };
+    adaptive(q, prev, p2, w, bits, mode)
+}
+
+/// Codec 5 mode 2 wherever the previous channel has the same bits, else mode 0.
+fn mode2(q: &[u16], prev: Previous, p2: Previous, w: usize, bits: u8) -> (GridCodec, Vec<u8>) {
+    let mode = match prev {
+        Some((_, b)) if b == bits => Mode::ResidualMinusPrevious,
+        _ => Mode::Residual,
+    };
+    adaptive(q, prev, p2, w, bits, mode)
+}
+
+/// A small dynamic model (the first 128 lod3 Gaussians, 32 of them moving, 2 GOPs of 60
+/// frames, language, f16 MLPW to keep the file small) written with these time features and
+/// deform model.
+fn small_dynamic(
+    scene: &Gaussians,
+    features: dlgs_encoder::FeatureCodec,
+    deform_model: DeformModel,
+    per_gop_range: bool,
+) -> (dlgs_encoder::synth::SynthModel, Vec<u8>) {
+    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
+    let spec = SynthSpec {
+        dynamic_fraction: 0.25,
+        gops: 2,
+        language: true,
+        deform_model,
+        ..Default::default()
+    };
+    let m = synth_dynamic(&first(scene, 128), &spec).unwrap();
+    let cfg = dlgs_encoder::EncoderConfig {
+        features,
+        per_gop_range,
+        mlp_weights: WeightType::F16,
+        ..Default::default()
+    };
+    let bytes = write_model(&m, cfg, Vec::new()).unwrap();
+    (m, bytes)
+}
+
+fn hevc() -> dlgs_encoder::FeatureCodec {
+    dlgs_encoder::FeatureCodec::Hevc(dlgs_encoder::HevcSettings {
+        preset: "ultrafast".into(),
+        ..Default::default()
+    })
+}
+
+/// `TFEA` codec 2: libx265's stream of the features tiled with one range for every channel
+/// (codec 1 with `per_gop_range`), stored with that range as codec 2's f64 pair. The samples
+/// then decode by codec 2's rule (`v16 / 65535`, not codec 1's `q / 4095`): the stored
+/// stream is what a reference-implementation model would carry.
+fn tfea_reference(scene: &Gaussians) -> Vec<u8> {
+    use dlgs::payload::time_features::{self, TfeaBody};
+    let (m, one) = small_dynamic(scene, hevc(), DeformModel::Reference, true);
+    let mut r = FileReader::open(std::io::Cursor::new(&one)).unwrap();
+    let s = r.scene().clone();
+    let cfg = dlgs_encoder::EncoderConfig {
+        features: hevc(),
+        mlp_weights: WeightType::F16,
+        ..Default::default()
+    };
+    let mut enc = dlgs_encoder::StreamEncoder::new(Vec::new(), s.clone(), cfg).unwrap();
+    for (g, d) in m.gops.iter().enumerate() {
+        let c = r.gop_chunks(g as u32).unwrap();
+        let c = c.iter().find(|c| c.ty == ChunkType::TFEA).unwrap();
+        let p = r.payload(c).unwrap();
+        let body =
+            time_features::decode(&p, c.payload_offset(), &s, &dlgs::Limits::default()).unwrap();
+        let TfeaBody::Hevc {
+            tiling,
+            ranges,
+            packets,
+            ..
+        } = body
+        else {
+            panic!("codec 1 expected")
+        };
+        assert!(ranges.iter().all(|r| *r == ranges[0]), "one range");
+        let coded = TfeaBody::Hevc {
+            tiling,
+            ranges: Vec::new(),
+            reference: Some((ranges[0].0 as f64, ranges[0].1 as f64)),
+            packets,
+            intra: false,
+        };
+        let canonical = dlgs_encoder::GopCanonical::State(&m.canonical);
+        enc.push_coded(canonical, Some(d), Some(&coded)).unwrap();
+    }
+    enc.finish().unwrap()
+}
+
+/// A sequential scene of 2 GOPs (first 128 lod3 Gaussians, 16 moving, exact features, f16
+/// MLPW): GOP 0
+/// `CRAW`, GOP 1 whatever `second` pushes.
+fn residual_scene(
+    scene: &Gaussians,
+    residual: dlgs_encoder::ResidualConfig,
+    second: impl Fn(&mut dlgs_encoder::StreamEncoder<Vec<u8>>, &dlgs_encoder::synth::SynthModel),
+) -> Vec<u8> {
+    use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
+    use dlgs_encoder::{GopCanonical, StreamEncoder};
+    let spec = SynthSpec {
+        dynamic_fraction: 0.125,
+        gops: 2,
+        residual_mode: ResidualMode::Sequential,
+        ..Default::default()
+    };
+    let m = synth_dynamic(&first(scene, 128), &spec).unwrap();
+    let cfg = dlgs_encoder::EncoderConfig {
+        features: dlgs_encoder::FeatureCodec::Exact,
+        residual,
+        mlp_weights: WeightType::F16,
+        ..Default::default()
+    };
+    let mut enc = StreamEncoder::new(Vec::new(), m.scene.clone(), cfg).unwrap();
+    enc.push(GopCanonical::State(&m.canonical), Some(&m.gops[0]))
+        .unwrap();
+    second(&mut enc, &m);
+    enc.finish().unwrap()
+}
+
+/// `RDLT` whose position deltas form a smooth ramp over the grid, which codec 2 (predictive)
+/// codes smaller than zstd.
+fn rdlt_predictive(scene: &Gaussians) -> Vec<u8> {
+    use dlgs::model::residual::{AttrGroup, DeltaTarget};
+    let residual = dlgs_encoder::ResidualConfig {
+        groups: AttrGroup::ALL
+            .into_iter()
+            .map(|g| match g {
+                AttrGroup::Position => (g, DeltaTarget::Bound(1e-4)),
+                _ => (g, DeltaTarget::Exact),
+            })
+            .collect(),
+        follow_quantisation: false,
+    };
+    residual_scene(scene, residual, |enc, m| {
+        let mut s1 = m.canonical.clone();
+        for set in [&mut s1.statics, &mut s1.dynamics] {
+            let w = grid_width(set.len());
+            for (i, p) in set.positions.iter_mut().enumerate() {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                p[0] += 0.003 * x + 0.002 * y;
+                p[1] -= 0.001 * x * y / w as f32;
+                p[2] += 0.004 * y;
+            }
+        }
+        enc.push(dlgs_encoder::GopCanonical::State(&s1), Some(&m.gops[1]))
+            .unwrap();
+    })
+}
+
+/// `RNTC` with small grids whose bits code smaller with one frequency for all plane segments
+/// (scope 1) than with each segment's own: the first seed from 0 for which that holds (the
+/// encoder codes both ways and keeps the smaller, §6.6.3).
+fn rntc_grid_scope(scene: &Gaussians) -> Vec<u8> {
+    use dlgs::model::ntc::NtcConfig;
+    use dlgs::payload::ntc_residual::grid_report;
+    residual_scene(scene, Default::default(), |enc, m| {
+        let small = NtcConfig {
+            resolutions: vec![16, 32, 64, 128],
+            features: 4,
+            log2_table: 10,
+            gate_resolution: 18,
+            gate_log2_table: 10,
+        };
+        let field = (0..1000u64)
+            .map(|seed| {
+                let mut rng = fastrand::Rng::with_seed(seed);
+                let mut f =
+                    dlgs_encoder::synth::synth_ntc(&m.canonical, &mut rng, 1.0, small.clone());
+                // Every plane level as dense as the others (the generator's thin out by level,
+                // where each segment's own frequency wins by far): the scopes then differ by
+                // the range coder's last words only.
+                for p in &mut f.planes {
+                    for mut b in p.iter_mut() {
+                        *b = rng.bool();
+                    }
+                }
+                f
+            })
+            .find(|f| {
+                let r = grid_report(f);
+                let sum = |f: fn(&dlgs::payload::ntc_residual::SegmentReport) -> usize| {
+                    r.iter().map(f).sum::<usize>()
+                };
+                sum(|s| s.bytes_grid) < sum(|s| s.bytes_segment)
+            })
+            .expect("a seed where scope 1 wins");
+        enc.push(dlgs_encoder::GopCanonical::Ntc(&field), Some(&m.gops[1]))
+            .unwrap();
+    })
+}
+
+/// Names of the vectors that list decoded frames (`valid/<name>.frames.f32`) besides
+/// `lod3-dynamic` and `lod3-dynamic-intra`.
+pub const LERP_VECTOR: &str = "lod3-dynamic-lerp";
+pub const HEVC_VECTOR: &str = "lod3-dynamic-hevc";
+pub const HEVC_REFERENCE_VECTOR: &str = "lod3-dynamic-hevc-ref";
+
+pub fn all(lod3: &Gaussians) -> Vec<Vector> {
+    let part = first(lod3, 256);
+    let csog = |name: &'static str, pick: Pick, about: &'static str| Vector {
+        name,
+        bytes: csog_forced(&part, pick),
+        error: None,
+        about,
+    };
+    vec![
+        csog("lod3-csog-zstd", zstd, "256 lod3 Gaussians as CSOG layout 1 (grid positions, preset low, no dynamic parts), every channel grid codec 1 (zstd, u8 or u16 LE cells), SH bands 1-3 (all 0) included"),
+        csog("lod3-csog-histogram", histogram, "as lod3-csog-zstd, every channel grid codec 3 (histogram: stored order-0 table, range-coded cells)"),
+        csog("lod3-csog-histogram-delta", histogram_delta, "as lod3-csog-zstd, every channel whose previous record has the same bits grid codec 4 (histogram of the difference from the previous channel, chains included), the others codec 3"),
+        csog("lod3-csog-adaptive-mode1", mode1, "as lod3-csog-zstd, every channel but the first grid codec 5 mode 1 (residual, context from the previous channel's residual class, previous channel of other bits included), the first mode 0"),
+        csog("lod3-csog-adaptive-mode2", mode2, "as lod3-csog-zstd, every channel whose previous record has the same bits grid codec 5 mode 2 (residual minus the previous channel's residual), the others mode 0"),
+        Vector {
+            name: "lod3-rdlt-predictive",
+            bytes: rdlt_predictive(lod3),
+            error: None,
+            about: "2 sequential GOPs of 128 lod3 Gaussians (16 moving, exact TFEA, f16 MLPW): GOP 0 CRAW, GOP 1 an RDLT whose positions (mode 1, bound 1e-4) move by a smooth ramp over the grid, so their delta channels take grid codec 2 (predictive); the other groups exact and unchanged (codec 0)",
+        },
+        Vector {
+            name: "lod3-rntc-grid-scope",
+            bytes: rntc_grid_scope(lod3),
+            error: None,
+            about: "as lod3-rdlt-predictive's scene, GOP 1 a generated RNTC (small grids, every group) whose bits are coded with frequency scope 1 (one 1-bit frequency over all plane segments, §6.6.3)",
+        },
+        Vector {
+            name: LERP_VECTOR,
+            bytes: small_dynamic(lod3, dlgs_encoder::FeatureCodec::Exact, DeformModel::PaperLerp, false).1,
+            error: None,
+            about: "2 GOPs of 60 frames, 32 of 128 lod3 Gaussians animated, language, exact TFEA, f16 MLPW, deform model 1 (the paper's lerp form, §6.4); decoded frames in lod3-dynamic-lerp.frames.f32",
+        },
+        Vector {
+            name: HEVC_VECTOR,
+            bytes: small_dynamic(lod3, hevc(), DeformModel::Reference, false).1,
+            error: None,
+            about: "lod3-dynamic-lerp's scene with deform model 0 and its time features as 12-bit HEVC (TFEA codec 1, one range per channel; libx265 crf 6, preset ultrafast); decoded frames in lod3-dynamic-hevc.frames.f32",
+        },
+        Vector {
+            name: HEVC_REFERENCE_VECTOR,
+            bytes: tfea_reference(lod3),
+            error: None,
+            about: "as lod3-dynamic-hevc with TFEA codec 2 (the reference implementation's dequantisation, one f64 range; the HEVC stream of the features tiled over one range); decoded frames in lod3-dynamic-hevc-ref.frames.f32",
+        },
+    ]
+}
+
+/// The payloads of every chunk of type `ty` in the GOPs of `bytes`.
+fn payloads(bytes: &[u8], ty: ChunkType) -> (SceneHeader, Vec<(u64, Vec<u8>)>) {
+    let mut r = FileReader::open(std::io::Cursor::new(bytes)).unwrap();
+    let scene = r.scene().clone();
+    let mut out = Vec::new();
+    for g in 0..scene.gop_count {
+        for c in r.gop_chunks(g).unwrap() {
+            if c.ty == ty {
+                out.push((c.payload_offset(), r.payload(&c).unwrap()));
+            }
+        }
+    }
+    (scene, out)
+}
+
+/// Every `CSOG` record's coding as `dlgs info --channels` names it.
+fn csog_codings(bytes: &[u8]) -> Vec<String> {
+    let (scene, ps) = payloads(bytes, ChunkType::CSOG);
+    ps.iter()
+        .flat_map(|(at, p)| sorted_grid::describe(p, *at, &scene).unwrap().records)
+        .map(|r| r.coding)
+        .collect()
+}
+
+/// The `codec` byte of every `RDLT` channel (§6.7.1).
+fn rdlt_codecs(bytes: &[u8]) -> Vec<u8> {
+    let mut codecs = Vec::new();
+    for (_, p) in payloads(bytes, ChunkType::RDLT).1 {
+        let mut at = 4 + 12 * p[0] as usize;
+        while at + 12 <= p.len() {
+            codecs.push(p[at + 4]);
+            at += 12 + u32::from_le_bytes(p[at + 8..at + 12].try_into().unwrap()) as usize;
+        }
+    }
+    codecs
+}
+
+/// The path each vector of [`all`] exists for, checked on its bytes: `Err` says what changed.
+pub fn claims(name: &str, bytes: &[u8]) -> Option<Result<(), String>> {
+    let all_of = |want: &[&str], at_least: &str| {
+        let c = csog_codings(bytes);
+        let ok = c.iter().all(|s| want.iter().any(|w| s.contains(w)))
+            && c.iter().any(|s| s.contains(at_least));
+        if ok {
+            Ok(())
+        } else {
+            Err(format!("{name}: codings {c:?}"))
+        }
+    };
+    let first_byte = |ty: ChunkType, at: usize, want: u8| {
+        let ps = payloads(bytes, ty).1;
+        if !ps.is_empty() && ps.iter().all(|(_, p)| p[at] == want) {
+            Ok(())
+        } else {
+            Err(format!(
+                "{name}: {ty} byte {at} is not {want} in every chunk"
+            ))
+        }
+    };
+    Some(match name {
+        "lod3-csog-zstd" => all_of(&["(codec 1)"], "(codec 1)"),
+        "lod3-csog-histogram" => all_of(&["(codec 3)"], "(codec 3)"),
+        "lod3-csog-histogram-delta" => all_of(&["(codec 3)", "(codec 4)"], "(codec 4)"),
+        "lod3-csog-adaptive-mode1" => all_of(&["(mode 0)", "(mode 1)"], "(mode 1)"),
+        "lod3-csog-adaptive-mode2" => all_of(&["(mode 0)", "(mode 2)"], "(mode 2)"),
+        "lod3-rdlt-predictive" => {
+            let c = rdlt_codecs(bytes);
+            if c.contains(&2) && c.iter().all(|&c| c <= 3) {
+                Ok(())
+            } else {
+                Err(format!("{name}: RDLT channel codecs {c:?}"))
+            }
+        }
+        "lod3-rntc-grid-scope" => first_byte(ChunkType::RNTC, 6, 1),
+        LERP_VECTOR => {
+            let r = FileReader::open(std::io::Cursor::new(bytes)).unwrap();
+            match r.scene().deform_model {
+                DeformModel::PaperLerp => first_byte(ChunkType::TFEA, 0, 0),
+                m => Err(format!("{name}: deform model {m:?}")),
+            }
+        }
+        HEVC_VECTOR => first_byte(ChunkType::TFEA, 0, 1),
+        HEVC_REFERENCE_VECTOR => first_byte(ChunkType::TFEA, 0, 2),
+        _ => return None,
+    })
+}
