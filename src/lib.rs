@@ -9,13 +9,15 @@
 #![deny(clippy::disallowed_methods)]
 
 pub mod bytes;
+pub mod chunks;
 pub mod container;
 pub mod elementary;
+pub mod entropy;
 pub mod error;
 pub mod interop;
 pub mod limits;
 pub mod model;
-pub mod payload;
+mod task_queue;
 
 pub use container::{ChunkType, FileReader, SceneHeader, StreamReader, Writer};
 pub use error::{Error, ErrorKind, Result};

@@ -5,13 +5,13 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use dlgs::chunks::craw::RawCodec;
+use dlgs::chunks::csog::grid_coder;
+use dlgs::chunks::csog::{QuantBits, RotationCoarsening};
+use dlgs::chunks::mlpw::WeightType;
 use dlgs::container::header::ResidualMode;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
-use dlgs::payload::grid_coder;
-use dlgs::payload::mlp_weights::WeightType;
-use dlgs::payload::raw_canonical::RawCodec;
-use dlgs::payload::sorted_grid::{QuantBits, RotationCoarsening};
 use dlgs_encoder::{
     CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, ResidualConfig, SortSpec,
 };
@@ -383,10 +383,10 @@ impl CodecArgs {
         if self.tiers.windows(2).any(|w| w[1] > w[0]) {
             bail!("--tiers fractions must not increase (each coarser grid holds less weight)");
         }
-        if self.tiers.len() >= dlgs::payload::sorted_grid::MAX_PARTS {
+        if self.tiers.len() >= dlgs::chunks::csog::MAX_PARTS {
             bail!(
                 "--tiers: at most {} fractions",
-                dlgs::payload::sorted_grid::MAX_PARTS - 1
+                dlgs::chunks::csog::MAX_PARTS - 1
             );
         }
         if let Some(f) = self.coarse_rotations {

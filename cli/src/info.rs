@@ -6,8 +6,8 @@ use std::io::BufReader;
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use dlgs::chunks::csog::{self, CsogSummary};
 use dlgs::container::{ChunkType, FileReader, NO_REFERENCE};
-use dlgs::payload::sorted_grid::{self, CsogSummary};
 use dlgs::Limits;
 use serde::Serialize;
 
@@ -101,7 +101,7 @@ fn collect(path: &Path, channels: bool) -> Result<Info> {
             *by_type.entry(c.ty.to_string()).or_insert(0) += c.len;
             if channels && c.ty == ChunkType::CSOG {
                 let p = r.payload(&c)?;
-                let summary = sorted_grid::describe(&p, c.payload_offset(), &scene)
+                let summary = csog::describe(&p, c.payload_offset(), &scene)
                     .with_context(|| format!("reading the CSOG chunk of GOP {}", e.gop))?;
                 csog.push(CsogRow {
                     gop: e.gop,

@@ -9,10 +9,10 @@
 //! `cargo bench -p dlgs-decoder --bench canonical`
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use dlgs::chunks::csog::{self, QuantBits, RotationCoarsening};
 use dlgs::container::SceneHeader;
 use dlgs::model::ntc::NtcConfig;
 use dlgs::model::Canonical;
-use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::Limits;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::synth::synth_ntc;
@@ -22,10 +22,10 @@ fn bench(c: &mut Criterion) {
     let g = plant();
     let sorted = permute(&g, &grid_order(&g, SortSpec::DEFAULT));
     let canon = Canonical::from_static(sorted);
-    let payload = sorted_grid::encode(&canon, &QuantBits::HIGH, 9).unwrap();
+    let payload = csog::encode(&canon, &QuantBits::HIGH, 9).unwrap();
     let part = [(g.clone(), QuantBits::HIGH)];
     let octree_payload = |rotation_coarsening, mixed_margin| {
-        let gop = sorted_grid::PartedGop {
+        let gop = csog::PartedGop {
             static_parts: &part,
             static_weight: None,
             dynamics: &canon.dynamics,
@@ -34,9 +34,9 @@ fn bench(c: &mut Criterion) {
             compact_records: true,
             mixed_margin,
         };
-        sorted_grid::encode_octree(&gop, 9).unwrap().0
+        csog::encode_octree(&gop, 9).unwrap().0
     };
-    let default = Some(dlgs::payload::grid_coder::MIXED_MARGIN);
+    let default = Some(dlgs::chunks::csog::grid_coder::MIXED_MARGIN);
     let octree = octree_payload(None, default);
     let coarse = octree_payload(Some(RotationCoarsening::DEFAULT), default);
     // `dlgs encode --fast-decode`: the default layout without codec 5's mixed modes.
@@ -57,25 +57,25 @@ fn bench(c: &mut Criterion) {
             .unwrap();
         group.bench_function(format!("csog_high_decode/{threads}t"), |b| {
             b.iter(|| {
-                pool.install(|| sorted_grid::decode(&payload, 0, &scene, &Limits::default()))
+                pool.install(|| csog::decode(&payload, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });
         group.bench_function(format!("csog_high_octree_decode/{threads}t"), |b| {
             b.iter(|| {
-                pool.install(|| sorted_grid::decode(&octree, 0, &scene, &Limits::default()))
+                pool.install(|| csog::decode(&octree, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });
         group.bench_function(format!("csog_high_coarse_decode/{threads}t"), |b| {
             b.iter(|| {
-                pool.install(|| sorted_grid::decode(&coarse, 0, &scene, &Limits::default()))
+                pool.install(|| csog::decode(&coarse, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });
         group.bench_function(format!("csog_high_fast_decode/{threads}t"), |b| {
             b.iter(|| {
-                pool.install(|| sorted_grid::decode(&fast, 0, &scene, &Limits::default()))
+                pool.install(|| csog::decode(&fast, 0, &scene, &Limits::default()))
                     .unwrap()
             })
         });
@@ -90,14 +90,14 @@ fn bench(c: &mut Criterion) {
 /// Decode time of one channel in each codec-5 mode (single thread: a channel is one stream).
 fn codec5_modes(c: &mut Criterion, g: &dlgs::model::Gaussians) {
     use dlgs::bytes::ByteReader;
-    use dlgs::payload::adaptive_coder::{decode, encode, Mode};
-    let set = sorted_grid::quantise_set(g, &QuantBits::HIGH);
+    use dlgs::chunks::csog::adaptive_coder::{decode, encode, Mode};
+    let set = csog::quantise_set(g, &QuantBits::HIGH);
     // Channels: position 3, log-scale 3, rotation index and 3 components, opacity, then DC.
     let dc = 11;
     let cells = |j: usize| (set.channels[j].3.as_slice(), set.channels[j].0);
     let (q, bits) = cells(dc + 2);
     let (prev, prev2) = (Some(cells(dc + 1)), Some(cells(dc)));
-    let width = sorted_grid::grid_width(q.len());
+    let width = csog::grid_width(q.len());
     let mut group = c.benchmark_group("codec5_plant_dc_blue");
     group.sample_size(20);
     for (name, mode) in [

@@ -6,8 +6,8 @@
 
 use std::time::Instant;
 
+use dlgs::chunks::{rdlt, rntc};
 use dlgs::container::ChunkType;
-use dlgs::payload::{delta_residual, ntc_residual};
 use dlgs_decoder::Decoder;
 
 fn main() -> dlgs::Result<()> {
@@ -29,7 +29,7 @@ fn main() -> dlgs::Result<()> {
             let t1 = Instant::now();
             let (decode_ms, apply_ms) = match c.ty {
                 ChunkType::RNTC => {
-                    let f = ntc_residual::decode(&p, 0, &scene, &limits)?;
+                    let f = rntc::decode(&p, 0, &scene, &limits)?;
                     let t2 = Instant::now();
                     f.apply(&base)?;
                     (
@@ -38,7 +38,7 @@ fn main() -> dlgs::Result<()> {
                     )
                 }
                 ChunkType::RDLT => {
-                    let d = delta_residual::decode(&p, 0, &scene, &limits)?;
+                    let d = rdlt::decode(&p, 0, &scene, &limits)?;
                     let t2 = Instant::now();
                     d.apply(&base);
                     (
@@ -72,7 +72,7 @@ fn eval_only<R: std::io::Read + std::io::Seek>(
         .find(|c| c.ty == ChunkType::RNTC)
         .expect("GOP 1 has an RNTC chunk");
     let p = dec.reader().payload(&c)?;
-    let f = ntc_residual::decode(&p, 0, scene, limits)?;
+    let f = rntc::decode(&p, 0, scene, limits)?;
     let positions: Vec<[f32; 3]> = base
         .statics
         .positions

@@ -2,8 +2,8 @@
 //! `ffmpeg` CLI: `cargo run --release -p dlgs-decoder --example tfea_dump -- FILE.dlgs GOP OUT.hevc`
 //! (prints the picture size and count).
 
+use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::container::ChunkType;
-use dlgs::payload::time_features::{self, TfeaBody};
 use dlgs_decoder::Decoder;
 
 fn main() -> dlgs::Result<()> {
@@ -21,7 +21,7 @@ fn main() -> dlgs::Result<()> {
         .find(|c| c.ty == ChunkType::TFEA)
         .expect("the GOP has time features");
     let p = dec.reader().payload(&c)?;
-    match time_features::decode(&p, 0, &scene, &limits)? {
+    match tfea::decode(&p, 0, &scene, &limits)? {
         TfeaBody::Hevc {
             tiling, packets, ..
         } => {

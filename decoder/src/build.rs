@@ -3,12 +3,10 @@
 
 use std::sync::Arc;
 
+use dlgs::chunks::tfea::{self, TfeaBody, Tiling};
+use dlgs::chunks::{decode_canonical, decode_residual, mlpw, CANONICAL_CHUNKS, RESIDUAL_CHUNKS};
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader};
 use dlgs::model::DeformMlps;
-use dlgs::payload::time_features::{self, TfeaBody, Tiling};
-use dlgs::payload::{
-    decode_canonical, decode_residual, mlp_weights, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
-};
 use dlgs::{Error, ErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
@@ -130,7 +128,7 @@ pub(crate) fn decode_dynamic(
     p: &DynamicPayloads,
 ) -> Result<(PlanarFeatures, DeformMlps)> {
     let (bytes, at) = (&p.tfea.0, p.tfea.1);
-    let features = match time_features::decode(bytes, at, scene, limits)? {
+    let features = match tfea::decode(bytes, at, scene, limits)? {
         TfeaBody::Exact(f) => PlanarFeatures::new(&f),
         TfeaBody::Hevc {
             tiling,
@@ -160,21 +158,15 @@ pub(crate) fn decode_dynamic(
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
             let frames = key_pictures(hevc, &refs, &tiling, tiling.keys, at)?;
             let data = match reference {
-                Some(range) => time_features::untile_columns(
-                    &frames,
-                    &tiling,
-                    time_features::reference_sample_value(range),
-                ),
-                None => time_features::untile_columns(
-                    &frames,
-                    &tiling,
-                    time_features::sample_value(&ranges),
-                ),
+                Some(range) => {
+                    tfea::untile_columns(&frames, &tiling, tfea::reference_sample_value(range))
+                }
+                None => tfea::untile_columns(&frames, &tiling, tfea::sample_value(&ranges)),
             };
             PlanarFeatures::from_columns(tiling.n, tiling.keys, tiling.channels, data)
         }
     };
-    let mlps = mlp_weights::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
+    let mlps = mlpw::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
     Ok((features, mlps))
 }
 
@@ -199,10 +191,10 @@ impl KeySource for IntraKeys {
             self.at,
         )?;
         let one = Tiling { keys: 1, ..*t };
-        Ok(time_features::untile_columns(
+        Ok(tfea::untile_columns(
             &frames,
             &one,
-            time_features::sample_value(&self.ranges),
+            tfea::sample_value(&self.ranges),
         ))
     }
 }

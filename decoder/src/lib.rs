@@ -17,12 +17,12 @@ use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 use std::sync::Arc;
 
+use dlgs::chunks::laed;
 use dlgs::container::gop::NO_REFERENCE;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
-use dlgs::payload::lang_decoder;
 use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
@@ -165,7 +165,7 @@ impl<R: Read + Seek> Decoder<R> {
         let p = self.reader.payload(&c)?;
         let scene = self.reader.scene().clone();
         let limits = *self.reader.limits();
-        lang_decoder::decode(&p, c.payload_offset(), &scene, &limits).map(Some)
+        laed::decode(&p, c.payload_offset(), &scene, &limits).map(Some)
     }
 
     fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {

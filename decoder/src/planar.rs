@@ -50,7 +50,7 @@ impl std::fmt::Debug for PlanarFeatures {
 }
 
 impl PlanarFeatures {
-    /// From features already laid out `(K, C, N)` (see `time_features::untile_columns`).
+    /// From features already laid out `(K, C, N)` (see `tfea::untile_columns`).
     pub fn from_columns(n: usize, keys: usize, channels: usize, data: Vec<f32>) -> Self {
         assert_eq!(data.len(), n * keys * channels, "(K, C, N) layout");
         PlanarFeatures {

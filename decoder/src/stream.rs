@@ -7,10 +7,10 @@ use std::io::Read;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use dlgs::chunks::laed;
 use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader, StreamEvent, StreamReader};
 use dlgs::model::lang_decoder::LangDecoder;
-use dlgs::payload::lang_decoder;
 use dlgs::{Error, ErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
@@ -81,7 +81,7 @@ impl<R: Read> StreamDecoder<R> {
         else {
             return Ok(None);
         };
-        lang_decoder::decode(p, c.payload_offset(), self.scene(), &self.limits).map(Some)
+        laed::decode(p, c.payload_offset(), self.scene(), &self.limits).map(Some)
     }
 
     /// The next GOP in file order, decoded; `None` after the last GOP (the index and tail

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use dlgs::payload::sorted_grid::{breakdown, QuantBits};
+use dlgs::chunks::csog::{breakdown, QuantBits};
 use dlgs_encoder::grid_sort::{grid_order, neighbour_distance, permute, SortSpec};
 
 fn main() {

@@ -7,8 +7,8 @@
 
 use std::path::PathBuf;
 
-use dlgs::payload::grid_coder;
-use dlgs::payload::sorted_grid::{grid_width, quantise_set, QuantBits};
+use dlgs::chunks::csog::grid_coder;
+use dlgs::chunks::csog::{grid_width, quantise_set, QuantBits};
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::invisible::drop_never_drawn;
 use dlgs_encoder::orientation::closest_to_identity;

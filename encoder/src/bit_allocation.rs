@@ -13,8 +13,8 @@
 //! numbers are not fitted to their own cameras. Every candidate is coded and decoded for real:
 //! the sizes are the payload's.
 
+use dlgs::chunks::csog::{self, QuantBits, RotationCoarsening};
 use dlgs::model::{Canonical, Gaussians};
-use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::{Limits, Result};
 use dlgs_render::{metrics, orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
 
@@ -117,7 +117,7 @@ impl Judge {
     fn score(&self, bits: &QuantBits) -> Result<(usize, f64)> {
         let payload = if self.octree {
             let part = [(self.canon.statics.clone(), *bits)];
-            let gop = sorted_grid::PartedGop {
+            let gop = csog::PartedGop {
                 static_parts: &part,
                 static_weight: None,
                 dynamics: &self.canon.dynamics,
@@ -126,13 +126,13 @@ impl Judge {
                 compact_records: true,
                 // Bytes judged as the default coder makes them, also under `--fast-decode`
                 // or `--mixed-margin` (which add a few percent to every candidate alike).
-                mixed_margin: Some(dlgs::payload::grid_coder::MIXED_MARGIN),
+                mixed_margin: Some(dlgs::chunks::csog::grid_coder::MIXED_MARGIN),
             };
-            sorted_grid::encode_octree(&gop, self.zstd_level)?.0
+            csog::encode_octree(&gop, self.zstd_level)?.0
         } else {
-            sorted_grid::encode(&self.canon, bits, self.zstd_level)?
+            csog::encode(&self.canon, bits, self.zstd_level)?
         };
-        let decoded = sorted_grid::decode(&payload, 0, &self.scene, &Limits::default())?.statics;
+        let decoded = csog::decode(&payload, 0, &self.scene, &Limits::default())?.statics;
         let psnr = metrics::psnr(&self.reference, &images(&decoded, &self.cams)?);
         Ok((payload.len(), psnr))
     }

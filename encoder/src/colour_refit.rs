@@ -175,7 +175,7 @@ pub struct OpacityLevels {
 
 impl OpacityLevels {
     pub fn of(
-        parts: &[(Gaussians, dlgs::payload::sorted_grid::QuantBits)],
+        parts: &[(Gaussians, dlgs::chunks::csog::QuantBits)],
         decoded: &Gaussians,
         stored: &[u32],
         place: &[(usize, usize)],
@@ -252,7 +252,7 @@ pub struct DcLattice {
 }
 
 impl DcLattice {
-    pub fn of_parts(parts: &[(Gaussians, dlgs::payload::sorted_grid::QuantBits)]) -> DcLattice {
+    pub fn of_parts(parts: &[(Gaussians, dlgs::chunks::csog::QuantBits)]) -> DcLattice {
         let parts = parts
             .iter()
             .map(|(g, bits)| {

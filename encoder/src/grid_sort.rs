@@ -8,9 +8,9 @@
 //! quarter of the grid to 1. Deterministic: no randomness, groups are disjoint so rounds run in parallel
 //! with the same result on any thread count.
 
+use dlgs::chunks::csog::grid_width;
+use dlgs::chunks::csog::kd_layout::{first_valid, halves, valid_in};
 use dlgs::model::Gaussians;
-use dlgs::payload::kd_layout::{first_valid, halves, valid_in};
-use dlgs::payload::sorted_grid::grid_width;
 use rayon::prelude::*;
 
 /// Feature dimensions the sort compares: position, DC colour, mean log-scale, opacity.

@@ -1,5 +1,5 @@
 //! How much each Gaussian of a still scene is worth in the grid shaper
-//! (`dlgs::payload::grid_shaping`): a Gaussian that adds little to any image may take a level
+//! (`dlgs::chunks::csog::grid_shaping`): a Gaussian that adds little to any image may take a level
 //! the entropy coder pays less for, at a larger error.
 //!
 //! Importance is the Gaussian's blending weight summed over 36 views of its own
@@ -7,7 +7,7 @@
 //! Its shaping weight (bits one squared quantisation step of error is worth) is `u /
 //! tolerance`: the image error a level change adds scales with the pixels the Gaussian covers.
 
-use dlgs::payload::sorted_grid::QuantBits;
+use dlgs::chunks::csog::QuantBits;
 use dlgs::Gaussians;
 use dlgs_render::contribution::contributions;
 use dlgs_render::{orbit_cameras, Camera, OrbitSpec};

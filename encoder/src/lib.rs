@@ -18,17 +18,17 @@ pub mod zero_bands;
 
 use std::io::Write;
 
+use dlgs::chunks::craw::{self, RawCodec};
+use dlgs::chunks::csog::{self, QuantBits, RotationCoarsening};
+use dlgs::chunks::mlpw::{self, WeightType};
+use dlgs::chunks::tfea::{self, TfeaBody, Tiling};
+use dlgs::chunks::{decode_canonical, laed, rdlt, rntc};
 use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
 use dlgs::model::DynamicGop;
-use dlgs::payload::mlp_weights::{self, WeightType};
-use dlgs::payload::raw_canonical::{self, RawCodec};
-use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
-use dlgs::payload::time_features::{self, TfeaBody, Tiling};
-use dlgs::payload::{decode_canonical, delta_residual, lang_decoder, ntc_residual};
 use dlgs::{Canonical, Error, ErrorKind, Result};
 pub use dlgs_video::HevcSettings;
 
@@ -203,7 +203,7 @@ pub struct EncoderConfig {
     pub compact_records: bool,
     /// Lossy (`CSOG`) scenes: let channels take codec 5's mixed-context modes where they code
     /// smaller than any other coding by this fraction (format 1.13; default
-    /// [`MIXED_MARGIN`](dlgs::payload::grid_coder::MIXED_MARGIN), `dlgs encode
+    /// [`MIXED_MARGIN`](dlgs::chunks::csog::grid_coder::MIXED_MARGIN), `dlgs encode
     /// --mixed-margin`). `None` (`dlgs encode --fast-decode`): the same values in files 1.5-3.1 %
     /// larger that decode in about half the time (docs/benchmarks/decode.md "Decode time
     /// against SOG and SPZ").
@@ -248,7 +248,7 @@ impl Default for EncoderConfig {
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
             compact_records: true,
-            mixed_margin: Some(dlgs::payload::grid_coder::MIXED_MARGIN),
+            mixed_margin: Some(dlgs::chunks::csog::grid_coder::MIXED_MARGIN),
             refit_colours: false,
             refit_opacities: false,
             refit_full_size: false,
@@ -358,7 +358,7 @@ impl<W: Write> StreamEncoder<W> {
                     0,
                 ));
             }
-            let bytes = lang_decoder::encode(d, cfg.lang_decoder_weights, 19)?;
+            let bytes = laed::encode(d, cfg.lang_decoder_weights, 19)?;
             writer.scene_chunk(ChunkType::LAED, 0, &bytes)?;
         }
         Ok(StreamEncoder {
@@ -456,11 +456,11 @@ impl<W: Write> StreamEncoder<W> {
                         _ => self.cfg.residual.groups.clone(),
                     };
                     let r = DeltaResidual::compute(&target, base, &groups)?;
-                    let payload = delta_residual::encode(&r, &s, self.cfg.zstd_level)?;
+                    let payload = rdlt::encode(&r, &s, self.cfg.zstd_level)?;
                     (ChunkType::RDLT, payload, Some(r.apply(base)))
                 }
                 GopCanonical::Ntc(field) => {
-                    let payload = ntc_residual::encode(field, &s, self.cfg.zstd_level)?;
+                    let payload = rntc::encode(field, &s, self.cfg.zstd_level)?;
                     (ChunkType::RNTC, payload, Some(field.apply(base)?))
                 }
             }
@@ -490,7 +490,7 @@ impl<W: Write> StreamEncoder<W> {
         Ok(match self.cfg.canonical {
             CanonicalCodec::Raw => (
                 ChunkType::CRAW,
-                raw_canonical::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?,
+                craw::encode(canon, self.cfg.raw_codec, self.cfg.zstd_level)?,
             ),
             CanonicalCodec::Sorted { bits, sort } => {
                 // Residual GOPs add offsets to the stored rotations and scales: only scenes
@@ -566,7 +566,7 @@ impl<W: Write> StreamEncoder<W> {
                 // The payload of `parts`, and per decoded static Gaussian its index in the
                 // parts' concatenation.
                 let code = |parts: &[(dlgs::Gaussians, QuantBits)]| -> Result<(Vec<u8>, Vec<u32>)> {
-                    let gop = sorted_grid::PartedGop {
+                    let gop = csog::PartedGop {
                         static_parts: parts,
                         static_weight: weights.as_deref(),
                         dynamics: &sorted.dynamics,
@@ -577,14 +577,11 @@ impl<W: Write> StreamEncoder<W> {
                     };
                     let identity = || (0..statics.len() as u32).collect();
                     Ok(if octree {
-                        sorted_grid::encode_octree(&gop, zstd_level)?
+                        csog::encode_octree(&gop, zstd_level)?
                     } else {
                         // Layout 1 even for one part: since 1.12 it stores an empty dynamic set
                         // as no parts, where layout 0 writes every channel's record for it.
-                        (
-                            sorted_grid::encode_grid_parts(&gop, zstd_level)?,
-                            identity(),
-                        )
+                        (csog::encode_grid_parts(&gop, zstd_level)?, identity())
                     })
                 };
                 let (mut payload, mut stored) = code(&parts)?;
@@ -617,7 +614,7 @@ impl<W: Write> StreamEncoder<W> {
     ) -> Result<Option<(Vec<u8>, Vec<u32>)>> {
         let limits = dlgs::limits::Limits::default();
         let scene = self.writer.scene();
-        let decoded = sorted_grid::decode(payload, 0, scene, &limits)?.statics;
+        let decoded = csog::decode(payload, 0, scene, &limits)?.statics;
         // Part, and index within it, of each Gaussian of the parts' concatenation.
         let mut place = Vec::with_capacity(stored.len());
         for (p, (g, _)) in parts.iter().enumerate() {
@@ -654,7 +651,7 @@ impl<W: Write> StreamEncoder<W> {
                     on_levels,
                 };
                 let coding = code(&refit.apply(parts, &decoded, stored, &place, &lattice))?;
-                redecoded.push(sorted_grid::decode(&coding.0, 0, scene, &limits)?.statics);
+                redecoded.push(csog::decode(&coding.0, 0, scene, &limits)?.statics);
                 codings.push(coding);
                 kinds.push((on_levels, levels.is_some()));
             }
@@ -705,11 +702,11 @@ impl<W: Write> StreamEncoder<W> {
             (FeatureCodec::Exact, None) => TfeaBody::Exact(f.clone()),
             (FeatureCodec::Hevc(settings), None) => {
                 let tiling = Tiling::for_count(f.n, f.keys, f.channels);
-                let ranges = time_features::ranges(f, self.cfg.per_gop_range);
+                let ranges = tfea::ranges(f, self.cfg.per_gop_range);
                 let video = dlgs_video::Gray12 {
                     width: tiling.width() as u32,
                     height: tiling.height() as u32,
-                    frames: time_features::tile(f, &tiling, &ranges),
+                    frames: tfea::tile(f, &tiling, &ranges),
                 };
                 let packets = dlgs_video::encode_gray12(&video, settings)
                     .map_err(|e| invalid(format!("time-feature video: {e}")))?;
@@ -722,8 +719,8 @@ impl<W: Write> StreamEncoder<W> {
                 }
             }
         };
-        let tfea = time_features::encode(&body, self.cfg.zstd_level)?;
-        let mlpw = mlp_weights::encode(&d.mlps, self.cfg.mlp_weights, self.cfg.zstd_level)?;
+        let tfea = tfea::encode(&body, self.cfg.zstd_level)?;
+        let mlpw = mlpw::encode(&d.mlps, self.cfg.mlp_weights, self.cfg.zstd_level)?;
         Ok((tfea, mlpw))
     }
 

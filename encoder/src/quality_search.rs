@@ -15,8 +15,8 @@
 use std::io::Cursor;
 use std::sync::Arc;
 
+use dlgs::chunks::csog::{self, QuantBits, RotationCoarsening};
 use dlgs::container::{ChunkType, FileReader};
-use dlgs::payload::sorted_grid::{self, QuantBits, RotationCoarsening};
 use dlgs::{Gaussians, Limits, Result};
 use dlgs_render::{metrics, orbit_cameras, Camera, OrbitSpec};
 
@@ -567,7 +567,7 @@ fn decode_still(file: &[u8]) -> Result<Gaussians> {
         ));
     };
     let payload = r.payload(info)?;
-    Ok(sorted_grid::decode(&payload, info.payload_offset(), &scene, &Limits::default())?.statics)
+    Ok(csog::decode(&payload, info.payload_offset(), &scene, &Limits::default())?.statics)
 }
 
 #[cfg(test)]

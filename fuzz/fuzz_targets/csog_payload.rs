@@ -18,8 +18,8 @@ fuzz_target!(|data: &[u8]| {
         s.lang_levels = 3;
         s.lang_dims = 3;
     }
-    let decoded = dlgs::payload::sorted_grid::decode(body, 0, &s, &dlgs::Limits::tiny());
-    let described = dlgs::payload::sorted_grid::describe(body, 0, &s);
+    let decoded = dlgs::chunks::csog::decode(body, 0, &s, &dlgs::Limits::tiny());
+    let described = dlgs::chunks::csog::describe(body, 0, &s);
     // Whatever decodes is also described (the converse need not hold: describe never decodes
     // cells, and decode may refuse an allocation under the tiny limits).
     assert!(decoded.is_err() || described.is_ok());

@@ -14,13 +14,13 @@ fuzz_target!(|data: &[u8]| {
     let limits = dlgs::Limits::tiny();
     let (sel, body) = data.split_first().unwrap_or((&0, &[]));
     if sel % 3 == 2 {
-        if let Ok(ld) = dlgs::payload::lang_decoder::decode(body, 0, &s, &limits) {
+        if let Ok(ld) = dlgs::chunks::laed::decode(body, 0, &s, &limits) {
             let mut out = vec![0.0; ld.embed_dims()];
             ld.decode_one(&vec![0.25; ld.input_dims()], &mut out);
         }
     } else if sel & 1 == 0 {
-        if let Ok(dlgs::payload::time_features::TfeaBody::Hevc { tiling, ranges, reference, packets, intra }) =
-            dlgs::payload::time_features::decode(body, 0, &s, &limits)
+        if let Ok(dlgs::chunks::tfea::TfeaBody::Hevc { tiling, ranges, reference, packets, intra }) =
+            dlgs::chunks::tfea::decode(body, 0, &s, &limits)
         {
             if intra {
                 // Codec 3: every packet decodes alone, as a seek does it.
@@ -31,12 +31,12 @@ fuzz_target!(|data: &[u8]| {
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
             if let Ok(v) = dlgs_video::decode_gray12(&refs, tiling.width() as u32, tiling.height() as u32, tiling.keys) {
                 let _ = match reference {
-                    Some(r) => dlgs::payload::time_features::untile_reference(&v.frames, &tiling, r),
-                    None => dlgs::payload::time_features::untile(&v.frames, &tiling, &ranges),
+                    Some(r) => dlgs::chunks::tfea::untile_reference(&v.frames, &tiling, r),
+                    None => dlgs::chunks::tfea::untile(&v.frames, &tiling, &ranges),
                 };
             }
         }
     } else {
-        let _ = dlgs::payload::mlp_weights::decode(body, 0, &s, &limits);
+        let _ = dlgs::chunks::mlpw::decode(body, 0, &s, &limits);
     }
 });

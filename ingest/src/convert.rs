@@ -6,9 +6,9 @@
 
 use std::io::Write;
 
+use dlgs::chunks::tfea::{TfeaBody, Tiling};
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::model::DynamicGop;
-use dlgs::payload::time_features::{TfeaBody, Tiling};
 use dlgs::{Canonical, SceneHeader};
 use dlgs_encoder::{EncoderConfig, FeatureCodec, GopCanonical, StreamEncoder};
 

@@ -6,9 +6,9 @@
 
 use std::path::{Path, PathBuf};
 
+use dlgs::chunks::tfea::{self, Tiling};
 use dlgs::model::dynamic::{DeformMlps, Layer, Mlp, MlpRole};
 use dlgs::model::TimeFeatures;
-use dlgs::payload::time_features::{self, Tiling};
 use dlgs::Gaussians;
 
 use crate::csv::{self, Row};
@@ -360,7 +360,7 @@ fn read_features(
         channels: CHANNELS,
         side,
     };
-    let f = time_features::untile_reference(&video.frames, &tiling, row);
+    let f = tfea::untile_reference(&video.frames, &tiling, row);
     check_finite(&what, &f.data)?;
     Ok((
         f,

@@ -8,7 +8,7 @@ use crate::model::Gaussians;
 pub const SH_C0: f32 = 0.282_094_8;
 
 /// The SH DC coefficient of 8-bit colour value `c` (`c` may lie outside 0..=255: an encoder
-/// extends the colour lattice past the data, `payload::colour_lattice`).
+/// extends the colour lattice past the data, `chunks::csog::colour_lattice`).
 pub fn colour_to_dc(c: f32) -> f32 {
     (c / 255.0 - 0.5) / SH_C0
 }

@@ -74,10 +74,10 @@ pub fn with_synthetic_language(g: &Gaussians) -> Gaussians {
 pub fn multi_gop_file(
     g: &Gaussians,
     gops: u32,
-    codec: dlgs::payload::raw_canonical::RawCodec,
+    codec: dlgs::chunks::craw::RawCodec,
 ) -> (Vec<u8>, Vec<dlgs::Canonical>) {
+    use dlgs::chunks::craw;
     use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
-    use dlgs::payload::raw_canonical;
     let mut scene = SceneHeader::still(g.len() as u32, g.sh_degree);
     if g.has_language() {
         scene.lang_levels = 3;
@@ -106,7 +106,7 @@ pub fn multi_gop_file(
         w.gop_chunk(
             ChunkType::CRAW,
             FLAG_MUST_UNDERSTAND,
-            &raw_canonical::encode(&c, codec, 3).unwrap(),
+            &craw::encode(&c, codec, 3).unwrap(),
         )
         .unwrap();
         canon.push(c);

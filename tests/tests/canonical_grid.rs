@@ -5,13 +5,13 @@
 use std::io::Cursor;
 
 use dlgs::bytes::ByteReader;
-use dlgs::container::SceneHeader;
-use dlgs::model::{Canonical, Gaussians};
-use dlgs::payload::grid_coder::{self, GridCodec};
-use dlgs::payload::sorted_grid::{
+use dlgs::chunks::csog::grid_coder::{self, GridCodec};
+use dlgs::chunks::csog::{
     self, dequantise, quantise_set, robust_radius, rotation_shift, QuantBits, RotationCoarsening,
     LOG_SCALE_BELOW_RADIUS, LOG_SCALE_SPAN,
 };
+use dlgs::container::SceneHeader;
+use dlgs::model::{Canonical, Gaussians};
 use dlgs::{ErrorKind, Limits};
 use dlgs_decoder::Decoder;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
@@ -36,8 +36,8 @@ fn scene_of(c: &Canonical) -> SceneHeader {
 }
 
 fn round_trip(c: &Canonical, bits: &QuantBits) -> Canonical {
-    let p = sorted_grid::encode(c, bits, 3).unwrap();
-    sorted_grid::decode(&p, 0, &scene_of(c), &Limits::default()).unwrap()
+    let p = csog::encode(c, bits, 3).unwrap();
+    csog::decode(&p, 0, &scene_of(c), &Limits::default()).unwrap()
 }
 
 #[test]
@@ -58,7 +58,7 @@ fn eight_bit_colours_decode_to_their_own_values() {
     // A float-valued scene takes the min/max range as before: the donut's DC is not on colours.
     let donut = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
     let dc: Vec<f32> = donut.sh.iter().step_by(3).copied().collect();
-    assert_eq!(dlgs::payload::colour_lattice::range(&dc, 8), None);
+    assert_eq!(dlgs::chunks::csog::colour_lattice::range(&dc, 8), None);
 }
 
 #[test]
@@ -266,7 +266,7 @@ fn degenerate_gaussians_decode_finite_and_nan_is_rejected() {
     assert!(d.rotations[0][0] > 0.999, "{:?}", d.rotations[0]);
     let mut bad = g.clone();
     bad.sh[7] = f32::NAN;
-    let e = sorted_grid::encode(&Canonical::from_static(bad), &QuantBits::HIGH, 3).unwrap_err();
+    let e = csog::encode(&Canonical::from_static(bad), &QuantBits::HIGH, 3).unwrap_err();
     assert!(
         e.to_string().contains("not finite") || e.to_string().contains("NaN"),
         "{e}"
@@ -280,7 +280,7 @@ fn payload_does_not_depend_on_thread_count() {
         on_threads(t, || {
             let order = grid_order(&g, SortSpec::REFINED);
             let c = Canonical::from_static(permute(&g, &order));
-            sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap()
+            csog::encode(&c, &QuantBits::HIGH, 3).unwrap()
         })
     };
     assert_eq!(run(1), run(2));
@@ -291,18 +291,18 @@ fn damaged_payloads_give_typed_errors() {
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let c = Canonical::from_static(g);
     let scene = scene_of(&c);
-    let p = sorted_grid::encode(&c, &QuantBits::MEDIUM, 3).unwrap();
+    let p = csog::encode(&c, &QuantBits::MEDIUM, 3).unwrap();
     let limits = Limits::tiny();
     let mut errors = 0;
     for cut in (0..p.len()).step_by(97) {
-        if sorted_grid::decode(&p[..cut], 0, &scene, &limits).is_err() {
+        if csog::decode(&p[..cut], 0, &scene, &limits).is_err() {
             errors += 1;
         }
     }
     assert_eq!(errors, p.len().div_ceil(97), "every truncation is an error");
     // `describe` (`dlgs info --channels`) reads the same records: the intact payload's
     // records hold all but its heads, every truncation is an error there too.
-    let summary = sorted_grid::describe(&p, 0, &scene).unwrap();
+    let summary = csog::describe(&p, 0, &scene).unwrap();
     let coded: usize = summary.records.iter().map(|r| r.bytes).sum();
     // Two sets (layout 0), each position, log-scale, rotation, opacity and SH channel.
     let per_set = 11 + c.statics.sh_stride();
@@ -314,7 +314,7 @@ fn damaged_payloads_give_typed_errors() {
     );
     for cut in (0..p.len()).step_by(97) {
         assert!(
-            sorted_grid::describe(&p[..cut], 0, &scene).is_err(),
+            csog::describe(&p[..cut], 0, &scene).is_err(),
             "cut at {cut}"
         );
     }
@@ -322,9 +322,9 @@ fn damaged_payloads_give_typed_errors() {
         let mut b = p.clone();
         b[i] ^= 0xa5;
         // Errors or finite Gaussians, never a panic; what decodes is also described.
-        if let Ok(d) = sorted_grid::decode(&b, 0, &scene, &limits) {
+        if let Ok(d) = csog::decode(&b, 0, &scene, &limits) {
             assert_eq!(d.statics.len(), c.statics.len());
-            assert!(sorted_grid::describe(&b, 0, &scene).is_ok(), "flip at {i}");
+            assert!(csog::describe(&b, 0, &scene).is_ok(), "flip at {i}");
         }
     }
 }
@@ -334,11 +334,11 @@ fn delta_codec_needs_a_previous_channel_of_the_same_bits() {
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let c = Canonical::from_static(g);
     let scene = scene_of(&c);
-    let mut p = sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap();
+    let mut p = csog::encode(&c, &QuantBits::HIGH, 3).unwrap();
     // Byte 0 layout version, 1..5 grid width, 5..7 channel count, 7 bits, 8 codec of the
     // first channel (position x).
     p[8] = 4;
-    let e = sorted_grid::decode(&p, 0, &scene, &Limits::default()).unwrap_err();
+    let e = csog::decode(&p, 0, &scene, &Limits::default()).unwrap_err();
     assert!(
         e.to_string().contains("codec 4 needs a previous channel"),
         "{e}"
@@ -351,7 +351,7 @@ fn real_scenes_pick_the_smallest_codec_per_channel() {
     // channels, and the round trip stays exact.
     let g = load("splat/marcelpadilla_plant.splat");
     let c = Canonical::from_static(g.clone());
-    let p = sorted_grid::encode(&c, &QuantBits::HIGH, 3).unwrap();
+    let p = csog::encode(&c, &QuantBits::HIGH, 3).unwrap();
     let mut r = 7;
     let mut codecs = Vec::new();
     for _ in 0..14 {
@@ -363,7 +363,7 @@ fn real_scenes_pick_the_smallest_codec_per_channel() {
         codecs.iter().filter(|&&c| c == 5).count() >= 10,
         "{codecs:?}"
     );
-    let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+    let d = csog::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
     let q = quantise_set(&g, &QuantBits::HIGH);
     for k in 11..14 {
         let (b, lo, hi, cells) = &q.channels[k];
@@ -390,7 +390,7 @@ fn the_adaptive_codec_shrinks_real_scenes_and_decodes_exactly() {
         let g = load(scene);
         let g = permute(&g, &grid_order(&g, SortSpec::NONE));
         let q = quantise_set(&g, &QuantBits::HIGH);
-        let w = sorted_grid::grid_width(g.len());
+        let w = csog::grid_width(g.len());
         let (mut best, mut tabled, mut adaptive) = (0, 0, 0);
         for j in 0..q.channels.len() {
             let (b, _, _, cells) = &q.channels[j];
@@ -447,7 +447,7 @@ fn without_mixing_no_channel_takes_modes_5_or_6_and_every_cell_decodes_the_same(
     let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
     let g = permute(&g, &grid_order(&g, SortSpec::NONE));
     let q = quantise_set(&g, &QuantBits::HIGH);
-    let w = sorted_grid::grid_width(g.len());
+    let w = csog::grid_width(g.len());
     let mixed = |codec: GridCodec, data: &[u8]| {
         codec == GridCodec::Adaptive && matches!(data.first(), Some(5 | 6))
     };
@@ -785,7 +785,7 @@ fn shaped_levels_stay_near_their_values_and_shrink_a_real_sh3_scene() {
         let (b, lo, hi, _) = q.channels[c];
         (hi - lo) / ((1u32 << b) - 1) as f32
     };
-    let limit = |c: usize| step(c) * (dlgs::payload::grid_shaping::MAX_MOVE as f32 + 0.01);
+    let limit = |c: usize| step(c) * (dlgs::chunks::csog::grid_shaping::MAX_MOVE as f32 + 0.01);
     assert_eq!(shaped.len(), plain.len());
     let mut moved = 0;
     for i in 0..plain.len() {
@@ -861,7 +861,7 @@ fn shaping_handles_degenerate_and_tiny_sets() {
     // Bad weights are an input error, not a panic.
     let c = Canonical::from_static(one.clone());
     for w in [vec![f32::NAN], vec![-1.0], vec![1.0, 1.0]] {
-        assert!(sorted_grid::encode_shaped(&c, &QuantBits::HIGH, 3, Some(&w)).is_err());
+        assert!(csog::encode_shaped(&c, &QuantBits::HIGH, 3, Some(&w)).is_err());
     }
 }
 
@@ -875,7 +875,7 @@ fn parted_lod3() -> (Vec<(Gaussians, QuantBits)>, Canonical, Vec<u8>) {
         (cut(1900..1971), QuantBits::LOW),
     ];
     let empty = Gaussians::new(g.sh_degree, 0);
-    let p = sorted_grid::encode_parts(&parts, &empty, &QuantBits::HIGH, 3).unwrap();
+    let p = csog::encode_parts(&parts, &empty, &QuantBits::HIGH, 3).unwrap();
     (parts, Canonical::from_static(g), p)
 }
 
@@ -883,7 +883,7 @@ fn parted_lod3() -> (Vec<(Gaussians, QuantBits)>, Canonical, Vec<u8>) {
 fn parted_sets_decode_to_their_parts_quantised_and_concatenated() {
     let (parts, c, p) = parted_lod3();
     assert_eq!(p[0], 1, "layout 1");
-    let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+    let d = csog::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
     assert_eq!(d.statics.len(), c.statics.len());
     let mut at = 0;
     for (g, bits) in &parts {
@@ -891,8 +891,8 @@ fn parted_sets_decode_to_their_parts_quantised_and_concatenated() {
         let alone = round_trip(&Canonical::from_static(g.clone()), bits);
         let whole = permute(&d.statics, &(at..at + g.len() as u32).collect::<Vec<u32>>());
         assert_eq!(
-            dlgs::payload::raw_canonical::canonical_body(&Canonical::from_static(whole)),
-            dlgs::payload::raw_canonical::canonical_body(&alone),
+            dlgs::chunks::craw::canonical_body(&Canonical::from_static(whole)),
+            dlgs::chunks::craw::canonical_body(&alone),
             "part at {at}"
         );
         at += g.len() as u32;
@@ -907,8 +907,8 @@ fn parted_sets_decode_the_same_floats_on_any_thread_count() {
     let scene = scene_of(&c);
     let run = |t| {
         on_threads(t, || {
-            let d = sorted_grid::decode(&p, 0, &scene, &Limits::default()).unwrap();
-            dlgs::payload::raw_canonical::canonical_body(&d)
+            let d = csog::decode(&p, 0, &scene, &Limits::default()).unwrap();
+            dlgs::chunks::craw::canonical_body(&d)
         })
     };
     let one = run(1);
@@ -928,9 +928,9 @@ fn parted_sets_keep_all_their_cells_within_the_allocation_limit() {
         max_alloc,
         ..Limits::default()
     };
-    assert!(sorted_grid::decode(&p, 0, &scene, &limits(cells)).is_ok());
+    assert!(csog::decode(&p, 0, &scene, &limits(cells)).is_ok());
     // Under the whole set's cells but above its largest part's (1,200 of 1,971 Gaussians).
-    let e = sorted_grid::decode(&p, 0, &scene, &limits(cells - 1)).unwrap_err();
+    let e = csog::decode(&p, 0, &scene, &limits(cells - 1)).unwrap_err();
     assert!(
         matches!(e.kind, ErrorKind::LimitExceeded { .. })
             && e.to_string().contains("CSOG channel cells"),
@@ -944,10 +944,10 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
     let scene = scene_of(&c);
     // `describe` walks the parts as decoding does and reports the same errors.
     let err = |b: &[u8]| {
-        let e = sorted_grid::decode(b, 0, &scene, &Limits::default())
+        let e = csog::decode(b, 0, &scene, &Limits::default())
             .unwrap_err()
             .to_string();
-        let d = sorted_grid::describe(b, 0, &scene).unwrap_err().to_string();
+        let d = csog::describe(b, 0, &scene).unwrap_err().to_string();
         assert_eq!(e, d);
         e
     };
@@ -980,7 +980,7 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
     assert_eq!(p.last(), Some(&0));
     let mut dynamic = scene.clone();
     dynamic.n_dynamic = 1;
-    let e = sorted_grid::decode(&p, 0, &dynamic, &Limits::default()).unwrap_err();
+    let e = csog::decode(&p, 0, &dynamic, &Limits::default()).unwrap_err();
     assert!(e.to_string().contains("0 parts for 1 Gaussians"), "{e}");
     // The 1.11 form of the same set (one part of 0 Gaussians, every channel record) still
     // decodes.
@@ -988,11 +988,10 @@ fn parted_sets_with_wrong_counts_give_typed_errors() {
     old.push(1);
     old.extend_from_slice(&0u32.to_le_bytes());
     let empty = Gaussians::new(c.statics.sh_degree, 0);
-    let with_part =
-        sorted_grid::encode(&Canonical::from_static(empty), &QuantBits::HIGH, 3).unwrap();
+    let with_part = csog::encode(&Canonical::from_static(empty), &QuantBits::HIGH, 3).unwrap();
     // Layout 0's payload is the layout byte, the (empty) static set, the (empty) dynamic set.
     old.extend_from_slice(&with_part[1..1 + (with_part.len() - 1) / 2]);
-    let back = sorted_grid::decode(&old, 0, &scene, &Limits::default()).unwrap();
+    let back = csog::decode(&old, 0, &scene, &Limits::default()).unwrap();
     assert_eq!((back.statics.len(), back.dynamics.len()), (1971, 0));
 }
 
@@ -1077,7 +1076,7 @@ fn octree_lod3_framed(coarsening: Option<RotationCoarsening>, compact: bool) -> 
         (cut(1700..1771), QuantBits::LOW.coarser(2)),
     ];
     let dynamics = cut(1771..1971);
-    let gop = sorted_grid::PartedGop {
+    let gop = csog::PartedGop {
         static_parts: &parts,
         static_weight: None,
         dynamics: &dynamics,
@@ -1086,7 +1085,7 @@ fn octree_lod3_framed(coarsening: Option<RotationCoarsening>, compact: bool) -> 
         compact_records: compact,
         mixed_margin: Some(grid_coder::MIXED_MARGIN),
     };
-    let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
+    let (p, order) = csog::encode_octree(&gop, 3).unwrap();
     let c = Canonical {
         statics: cut(0..1771),
         dynamics,
@@ -1100,7 +1099,7 @@ fn octree_sets_decode_in_the_order_the_encoder_reports() {
     // stored in the k-d order of its decoded positions; the dynamic set keeps its order.
     let (c, parts, p, order) = octree_lod3();
     assert_eq!(p[0], 2, "layout 2");
-    let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+    let d = csog::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
     assert_eq!(d.statics.len(), c.statics.len());
     let mut seen = order.clone();
     seen.sort_unstable();
@@ -1138,7 +1137,7 @@ fn octree_sets_decode_in_the_order_the_encoder_reports() {
         .iter()
         .map(|(g, b)| (permute(g, &grid_order(g, SortSpec::DEFAULT)), *b))
         .collect();
-    let grid = sorted_grid::encode_parts(&sorted, &c.dynamics, &QuantBits::HIGH, 3).unwrap();
+    let grid = csog::encode_parts(&sorted, &c.dynamics, &QuantBits::HIGH, 3).unwrap();
     assert!(
         p.len() < grid.len(),
         "octree {} B, grid {} B",
@@ -1154,8 +1153,8 @@ fn octree_sets_decode_the_same_floats_on_any_thread_count() {
         let (c, _, p, _) = octree_lod3_with(coarsening);
         let run = |n: usize| {
             on_threads(n, || {
-                let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
-                dlgs::payload::raw_canonical::canonical_body(&d)
+                let d = csog::decode(&p, 0, &scene_of(&c), &Limits::default()).unwrap();
+                dlgs::chunks::craw::canonical_body(&d)
             })
         };
         let one = run(1);
@@ -1173,7 +1172,7 @@ fn decode_with_flipped_bits(p: &[u8], scene: &SceneHeader, from: usize, seed: u3
         let mut b = p.to_vec();
         let at = from + (s as usize >> 8) % 4000;
         b[at] ^= 1 << (s % 8);
-        let _ = sorted_grid::decode(&b, 0, scene, &Limits::default());
+        let _ = csog::decode(&b, 0, scene, &Limits::default());
     }
 }
 
@@ -1185,10 +1184,10 @@ fn damaged_octree_sets_give_typed_errors_not_panics() {
     // 12 position bits, 13..37 ranges, 37..41 octree length.
     // `describe` walks the parts as decoding does and reports the same errors.
     let err = |b: &[u8]| {
-        let e = sorted_grid::decode(b, 0, &scene, &Limits::default())
+        let e = csog::decode(b, 0, &scene, &Limits::default())
             .unwrap_err()
             .to_string();
-        let d = sorted_grid::describe(b, 0, &scene).unwrap_err().to_string();
+        let d = csog::describe(b, 0, &scene).unwrap_err().to_string();
         assert_eq!(e, d);
         e
     };
@@ -1264,8 +1263,8 @@ fn compact_records_decode_to_layout_3s_gaussians_in_fewer_bytes() {
     assert_eq!(order4, order3, "the order follows the positions alone");
     let scene = scene_of(&c);
     let body = |p: &[u8]| {
-        let d = sorted_grid::decode(p, 0, &scene, &Limits::default()).unwrap();
-        dlgs::payload::raw_canonical::canonical_body(&d)
+        let d = csog::decode(p, 0, &scene, &Limits::default()).unwrap();
+        dlgs::chunks::craw::canonical_body(&d)
     };
     assert_eq!(body(&p4), body(&p3), "the same Gaussians, bit for bit");
     // Every record saves at least its second head byte and a length byte (all are under 2 MB),
@@ -1288,7 +1287,7 @@ fn compact_records_decode_to_layout_3s_gaussians_in_fewer_bytes() {
 fn damaged_compact_records_give_typed_errors_not_panics() {
     let (c, _, p, _) = octree_lod3_framed(Some(COARSE), true);
     let scene = scene_of(&c);
-    let err = |b: &[u8]| match sorted_grid::decode(b, 0, &scene, &Limits::default()) {
+    let err = |b: &[u8]| match csog::decode(b, 0, &scene, &Limits::default()) {
         Err(e) => e.to_string(),
         Ok(_) => panic!("a damaged payload decoded"),
     };
@@ -1349,8 +1348,8 @@ fn coarse_rotation_sets_turn_small_gaussians_within_their_shifted_steps() {
     assert_eq!(order3, order2, "the order follows the positions alone");
     assert!(p3.len() < p2.len(), "{} B vs {} B", p3.len(), p2.len());
     let scene = scene_of(&c);
-    let d2 = sorted_grid::decode(&p2, 0, &scene, &Limits::default()).unwrap();
-    let d3 = sorted_grid::decode(&p3, 0, &scene, &Limits::default()).unwrap();
+    let d2 = csog::decode(&p2, 0, &scene, &Limits::default()).unwrap();
+    let d3 = csog::decode(&p3, 0, &scene, &Limits::default()).unwrap();
     assert_eq!(d3.statics.positions, d2.statics.positions);
     assert_eq!(d3.statics.log_scales, d2.statics.log_scales);
     assert_eq!(d3.statics.sh, d2.statics.sh);
@@ -1405,10 +1404,10 @@ fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
     let scene = scene_of(&c);
     // `describe` walks the parts as decoding does and reports the same errors.
     let err = |b: &[u8]| {
-        let e = sorted_grid::decode(b, 0, &scene, &Limits::default())
+        let e = csog::decode(b, 0, &scene, &Limits::default())
             .unwrap_err()
             .to_string();
-        let d = sorted_grid::describe(b, 0, &scene).unwrap_err().to_string();
+        let d = csog::describe(b, 0, &scene).unwrap_err().to_string();
         assert_eq!(e, d);
         e
     };
@@ -1422,7 +1421,7 @@ fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
     // Max shift 0 turns coarsening off: the file still decodes (to other rotations).
     let mut b = p.clone();
     b[at] = 0;
-    assert!(sorted_grid::decode(&b, 0, &scene, &Limits::default()).is_ok());
+    assert!(csog::decode(&b, 0, &scene, &Limits::default()).is_ok());
     // Flipped bits around the record and in the rotation channels: never a panic.
     let mut s = 11u32;
     for _ in 0..300 {
@@ -1430,7 +1429,7 @@ fn damaged_coarse_rotation_records_give_typed_errors_not_panics() {
         let mut b = p.clone();
         let i = at + (s as usize >> 8) % (p.len() - at);
         b[i] ^= 1 << (s % 8);
-        let _ = sorted_grid::decode(&b, 0, &scene, &Limits::default());
+        let _ = csog::decode(&b, 0, &scene, &Limits::default());
     }
 }
 
@@ -1441,7 +1440,7 @@ fn degenerate_gaussians_decode_finite_in_coarse_rotation_sets() {
     let g = degenerate_lod3();
     let parts = [(g.clone(), QuantBits::LOW)];
     let empty = Gaussians::new(g.sh_degree, 0);
-    let gop = sorted_grid::PartedGop {
+    let gop = csog::PartedGop {
         static_parts: &parts,
         static_weight: None,
         dynamics: &empty,
@@ -1450,10 +1449,10 @@ fn degenerate_gaussians_decode_finite_in_coarse_rotation_sets() {
         compact_records: true,
         mixed_margin: Some(grid_coder::MIXED_MARGIN),
     };
-    let (p, order) = sorted_grid::encode_octree(&gop, 3).unwrap();
+    let (p, order) = csog::encode_octree(&gop, 3).unwrap();
     assert_eq!(p[0], 4, "layout 4: layout 3 in compact records");
     let c = Canonical::from_static(g);
-    let d = sorted_grid::decode(&p, 0, &scene_of(&c), &Limits::default())
+    let d = csog::decode(&p, 0, &scene_of(&c), &Limits::default())
         .unwrap()
         .statics;
     assert!(d.positions.iter().all(|p| p[0] == 0.25));

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use dlgs::payload::raw_canonical::canonical_digest;
+use dlgs::chunks::craw::canonical_digest;
 use dlgs::Limits;
 use dlgs_tests::{decode_all_random, decode_all_stream, vectors};
 

@@ -1,9 +1,9 @@
 //! Container round trips over both readers, chunk-skipping rules, and typed errors.
 
+use dlgs::chunks::craw::RawCodec;
 use dlgs::container::{
     ChunkType, FileReader, SceneHeader, StreamReader, Writer, FLAG_MUST_UNDERSTAND,
 };
-use dlgs::payload::raw_canonical::RawCodec;
 use dlgs::{ErrorKind, Limits};
 use dlgs_tests::{
     decode_all_random, decode_all_stream, load, multi_gop_file, with_synthetic_language,
@@ -89,7 +89,7 @@ fn unknown_must_understand_chunks_are_rejected_by_both_readers() {
         w.gop_chunk(
             ChunkType::CRAW,
             FLAG_MUST_UNDERSTAND,
-            &dlgs::payload::raw_canonical::encode(&c, RawCodec::None, 0).unwrap(),
+            &dlgs::chunks::craw::encode(&c, RawCodec::None, 0).unwrap(),
         )
         .unwrap();
         let bytes = w.finish().unwrap();

@@ -5,7 +5,7 @@
 use std::alloc::System;
 
 use cap::Cap;
-use dlgs::payload::raw_canonical::RawCodec;
+use dlgs::chunks::craw::RawCodec;
 use dlgs::Limits;
 use dlgs_tests::{
     decode_all_random, decode_all_stream, load, multi_gop_file, with_synthetic_language,

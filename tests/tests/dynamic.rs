@@ -7,9 +7,9 @@
 
 use std::io::Cursor;
 
+use dlgs::chunks::mlpw::WeightType;
+use dlgs::chunks::tfea::{self, Tiling};
 use dlgs::container::header::DeformModel;
-use dlgs::payload::mlp_weights::WeightType;
-use dlgs::payload::time_features::{self, Tiling};
 use dlgs::Limits;
 use dlgs_decoder::{Decoder, FrameOptions};
 use dlgs_encoder::synth::{synth_dynamic, write_model, SynthModel, SynthSpec};
@@ -130,7 +130,7 @@ fn feature_error_table(m: &SynthModel, bytes: &[u8]) -> (f32, f32) {
     let d = dec.gop(0).unwrap();
     let got = d.dynamic().unwrap().unwrap().features;
     let want = &m.gops[0].features;
-    let ranges = time_features::ranges(want, false);
+    let ranges = tfea::ranges(want, false);
     let (mut worst_max, mut worst_mean) = (0f32, 0f32);
     for c in 0..16 {
         let errs: Vec<f32> = (0..want.n)
@@ -166,8 +166,8 @@ fn hevc_lossless_is_exactly_the_12_bit_quantisation() {
     let got = gop.dynamic().unwrap().unwrap().features;
     let f = &m.gops[0].features;
     let t = Tiling::for_count(f.n, f.keys, f.channels);
-    let r = time_features::ranges(f, false);
-    let want = time_features::untile(&time_features::tile(f, &t, &r), &t, &r);
+    let r = tfea::ranges(f, false);
+    let want = tfea::untile(&tfea::tile(f, &t, &r), &t, &r);
     assert_eq!(
         &got, &want,
         "lossless HEVC must reproduce the 12-bit samples"

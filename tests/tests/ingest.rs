@@ -7,8 +7,8 @@
 
 use std::path::{Path, PathBuf};
 
-use dlgs::payload::mlp_weights::WeightType;
-use dlgs::payload::sorted_grid::QuantBits;
+use dlgs::chunks::csog::QuantBits;
+use dlgs::chunks::mlpw::WeightType;
 use dlgs::Gaussians;
 use dlgs_decoder::{Decoder, FrameOptions};
 use dlgs_encoder::{CanonicalCodec, EncoderConfig, ResidualConfig, SortSpec};

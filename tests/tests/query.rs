@@ -7,10 +7,10 @@
 //!
 //! `cargo test --release -p dlgs-tests --test query -- --nocapture` prints the IoU tables.
 
+use dlgs::chunks::laed;
+use dlgs::chunks::mlpw::WeightType;
 use dlgs::container::SceneHeader;
 use dlgs::model::lang_decoder::LangDecoder;
-use dlgs::payload::lang_decoder;
-use dlgs::payload::mlp_weights::WeightType;
 use dlgs::{Gaussians, Limits};
 use dlgs_decoder::{Decoder, FrameOptions};
 use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
@@ -436,13 +436,10 @@ fn lang_decoder_chunk_round_trips_and_rejects_damage() {
     scene.lang_levels = 3;
     scene.lang_dims = 3;
     let lim = Limits::default();
-    let p32 = lang_decoder::encode(&book.decoder, WeightType::F32, 3).unwrap();
-    assert_eq!(
-        lang_decoder::decode(&p32, 0, &scene, &lim).unwrap(),
-        book.decoder
-    );
-    let p16 = lang_decoder::encode(&book.decoder, WeightType::F16, 3).unwrap();
-    let d16 = lang_decoder::decode(&p16, 0, &scene, &lim).unwrap();
+    let p32 = laed::encode(&book.decoder, WeightType::F32, 3).unwrap();
+    assert_eq!(laed::decode(&p32, 0, &scene, &lim).unwrap(), book.decoder);
+    let p16 = laed::encode(&book.decoder, WeightType::F16, 3).unwrap();
+    let d16 = laed::decode(&p16, 0, &scene, &lim).unwrap();
     for (a, b) in d16.layers.iter().zip(&book.decoder.layers) {
         for (x, y) in a.weight.iter().zip(&b.weight) {
             assert_eq!(*x, half::f16::from_f32(*y).to_f32());
@@ -451,23 +448,23 @@ fn lang_decoder_chunk_round_trips_and_rejects_damage() {
     // Wrong input width for the scene, no language, truncation, bit flips: typed errors.
     let mut two = scene.clone();
     two.lang_dims = 2;
-    assert!(lang_decoder::decode(&p32, 0, &two, &lim).is_err());
+    assert!(laed::decode(&p32, 0, &two, &lim).is_err());
     let mut none = scene.clone();
     none.lang_levels = 0;
     none.lang_dims = 0;
-    assert!(lang_decoder::decode(&p32, 0, &none, &lim).is_err());
+    assert!(laed::decode(&p32, 0, &none, &lim).is_err());
     for cut in 0..p16.len() {
-        assert!(lang_decoder::decode(&p16[..cut], 0, &scene, &lim).is_err());
+        assert!(laed::decode(&p16[..cut], 0, &scene, &lim).is_err());
     }
     for i in 0..p16.len().min(200) {
         let mut b = p16.clone();
         b[i] ^= 0x5a;
-        let _ = lang_decoder::decode(&b, 0, &scene, &lim);
+        let _ = laed::decode(&b, 0, &scene, &lim);
     }
     // NaN weights are refused by the encoder.
     let mut bad = book.decoder.clone();
     bad.layers[2].weight[0] = f32::NAN;
-    assert!(lang_decoder::encode(&bad, WeightType::F32, 3).is_err());
+    assert!(laed::encode(&bad, WeightType::F32, 3).is_err());
     // A decoder for a scene without language is refused by the encoder.
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let cfg = EncoderConfig {

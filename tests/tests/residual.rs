@@ -10,10 +10,11 @@
 use std::io::Cursor;
 
 use bitvec::prelude::*;
+use dlgs::chunks::rntc;
 use dlgs::container::header::ResidualMode;
+use dlgs::entropy::binary_bits;
 use dlgs::model::ntc::{NtcConfig, NtcField};
 use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
-use dlgs::payload::{binary_bits, ntc_residual};
 use dlgs::{Canonical, Limits};
 use dlgs_decoder::{Decoder, FrameOptions};
 use dlgs_encoder::synth::{synth_dynamic, synth_ntc, write_model, SynthModel, SynthSpec};
@@ -44,7 +45,7 @@ fn open(bytes: &[u8]) -> Decoder<Cursor<&[u8]>> {
 }
 
 fn bits_identical(a: &Canonical, b: &Canonical) -> bool {
-    let body = dlgs::payload::raw_canonical::canonical_body;
+    let body = dlgs::chunks::craw::canonical_body;
     body(a) == body(b)
 }
 
@@ -103,10 +104,10 @@ fn binary_grids_code_within_one_percent_of_the_entropy_bound() {
 fn ntc_chunk_round_trips_every_bit_and_weight() {
     let m = model(ResidualMode::Sequential, 2);
     let field = m.residuals[1].as_ref().unwrap();
-    let p = ntc_residual::encode(field, &m.scene, 9).unwrap();
-    let back = ntc_residual::decode(&p, 0, &m.scene, &Limits::default()).unwrap();
+    let p = rntc::encode(field, &m.scene, 9).unwrap();
+    let back = rntc::decode(&p, 0, &m.scene, &Limits::default()).unwrap();
     assert_eq!(&back, field);
-    let segs = ntc_residual::grid_report(field);
+    let segs = rntc::grid_report(field);
     println!("segment   bits      p(+1)   bound B  own-p B  grid-p B");
     for (i, s) in segs.iter().enumerate() {
         println!(
@@ -137,14 +138,14 @@ fn constant_and_degenerate_grids_round_trip() {
     f.planes[0].fill(false);
     f.planes[1].fill(true);
     f.gate.fill(true);
-    let p = ntc_residual::encode(&f, &m.scene, 3).unwrap();
+    let p = rntc::encode(&f, &m.scene, 3).unwrap();
     assert_eq!(
-        ntc_residual::decode(&p, 0, &m.scene, &Limits::default()).unwrap(),
+        rntc::decode(&p, 0, &m.scene, &Limits::default()).unwrap(),
         f
     );
     // NaN weights are refused by the encoder.
     f.mlp.b2[0] = f32::NAN;
-    assert!(ntc_residual::encode(&f, &m.scene, 3).is_err());
+    assert!(rntc::encode(&f, &m.scene, 3).is_err());
 }
 
 /// Every row of `rows` (from `residuals_at`) has the bits of the plain one-position evaluation.
@@ -284,7 +285,7 @@ fn seeking_in_any_order_gives_the_frames_of_playback() {
                 let f = play.frame_at(t, &opts()).unwrap();
                 (
                     t,
-                    dlgs::payload::raw_canonical::canonical_body(&Canonical {
+                    dlgs::chunks::craw::canonical_body(&Canonical {
                         statics: f.statics().clone(),
                         dynamics: f.dynamics,
                     })
@@ -300,7 +301,7 @@ fn seeking_in_any_order_gives_the_frames_of_playback() {
             d.set_gop_cache(gop_cache);
             for &t in &times {
                 let f = d.seek(t, &opts()).unwrap();
-                let body = dlgs::payload::raw_canonical::canonical_body(&Canonical {
+                let body = dlgs::chunks::craw::canonical_body(&Canonical {
                     statics: f.statics().clone(),
                     dynamics: f.dynamics,
                 });
@@ -487,8 +488,8 @@ fn damaged_residual_files_fail_cleanly_or_decode_identically() {
         1.0,
         Default::default(),
     );
-    let p = ntc_residual::encode(&f, &m.scene, 3).unwrap();
+    let p = rntc::encode(&f, &m.scene, 3).unwrap();
     for cut in (0..p.len()).step_by(997) {
-        assert!(ntc_residual::decode(&p[..cut], 0, &m.scene, &Limits::default()).is_err());
+        assert!(rntc::decode(&p[..cut], 0, &m.scene, &Limits::default()).is_err());
     }
 }

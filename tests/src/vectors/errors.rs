@@ -1,9 +1,9 @@
 //! Invalid vectors for the index, the tail and a zstd `CRAW` body (format-spec §5.2, §5.3,
 //! §6.1): each is the valid `tiny-still` with exactly one fault, every other CRC kept valid.
 
+use dlgs::chunks::craw::{self, RawCodec};
 use dlgs::container::chunk::encode_header;
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
-use dlgs::payload::raw_canonical::{self, RawCodec};
 use dlgs::Canonical;
 
 use super::Vector;
@@ -60,7 +60,7 @@ pub fn all(base: &[u8], tiny: &Canonical, tiny_scene: &SceneHeader) -> Vec<Vecto
     assert_eq!(crc32c(b"123456789"), 0xE306_9283);
     // The rebuild of an unchanged index is the file itself: the helpers add no other change.
     assert_eq!(with_gidx(base, |_| {}), base);
-    let mut craw = raw_canonical::encode(tiny, RawCodec::Zstd, 19).unwrap();
+    let mut craw = craw::encode(tiny, RawCodec::Zstd, 19).unwrap();
     craw.extend_from_slice(&[1, 2, 3, 4]);
     let mut w = Writer::new(Vec::new(), tiny_scene.clone()).unwrap();
     w.begin_gop().unwrap();

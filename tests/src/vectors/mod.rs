@@ -2,9 +2,9 @@
 //! them; `tests/conformance.rs` checks the committed files equal what this code builds and
 //! that readers give the listed checksums or errors.
 
+use dlgs::chunks::craw::{self, RawCodec};
 use dlgs::container::chunk::encode_header;
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
-use dlgs::payload::raw_canonical::{self, RawCodec};
 use dlgs::Canonical;
 
 use crate::{load, multi_gop_file, with_synthetic_language};
@@ -26,7 +26,7 @@ fn still(c: &Canonical, scene: SceneHeader, codec: RawCodec) -> Vec<u8> {
     w.gop_chunk(
         ChunkType::CRAW,
         FLAG_MUST_UNDERSTAND,
-        &raw_canonical::encode(c, codec, 19).unwrap(),
+        &craw::encode(c, codec, 19).unwrap(),
     )
     .unwrap();
     w.finish().unwrap()
@@ -215,7 +215,7 @@ pub fn all() -> Vec<Vector> {
     w.gop_chunk(
         ChunkType::CRAW,
         FLAG_MUST_UNDERSTAND,
-        &raw_canonical::encode(&tiny_c, RawCodec::None, 0).unwrap(),
+        &craw::encode(&tiny_c, RawCodec::None, 0).unwrap(),
     )
     .unwrap();
     v.push(Vector {
@@ -235,7 +235,7 @@ fn still_unchecked(c: &Canonical, scene: SceneHeader) -> Vec<u8> {
     w.gop_chunk(
         ChunkType::CRAW,
         FLAG_MUST_UNDERSTAND,
-        &raw_canonical::encode(c, RawCodec::None, 0).unwrap(),
+        &craw::encode(c, RawCodec::None, 0).unwrap(),
     )
     .unwrap();
     w.finish().unwrap()
@@ -283,8 +283,8 @@ fn small_lang_decoder() -> dlgs::model::lang_decoder::LangDecoder {
 }
 
 fn laed_vector(lang: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs::chunks::mlpw::WeightType;
     use dlgs::model::lang_decoder::LangDecoder;
-    use dlgs::payload::mlp_weights::WeightType;
     let mut scene = SceneHeader::still(lang.len() as u32, lang.sh_degree);
     scene.lang_levels = 3;
     scene.lang_dims = 3;
@@ -293,14 +293,14 @@ fn laed_vector(lang: &dlgs::Gaussians) -> Vec<u8> {
     w.scene_chunk(
         ChunkType::LAED,
         0,
-        &dlgs::payload::lang_decoder::encode(&d, WeightType::F16, 19).unwrap(),
+        &dlgs::chunks::laed::encode(&d, WeightType::F16, 19).unwrap(),
     )
     .unwrap();
     w.begin_gop().unwrap();
     w.gop_chunk(
         ChunkType::CRAW,
         FLAG_MUST_UNDERSTAND,
-        &raw_canonical::encode(&Canonical::from_static(lang.clone()), RawCodec::None, 19).unwrap(),
+        &craw::encode(&Canonical::from_static(lang.clone()), RawCodec::None, 19).unwrap(),
     )
     .unwrap();
     w.finish().unwrap()
@@ -334,7 +334,7 @@ pub fn expected_lines(v: &Vector) -> Vec<String> {
     let gops = crate::decode_all_random(&v.bytes, dlgs::Limits::default()).unwrap();
     gops.iter()
         .enumerate()
-        .map(|(g, c)| format!("{} {g} {}", v.name, raw_canonical::canonical_digest(c)))
+        .map(|(g, c)| format!("{} {g} {}", v.name, craw::canonical_digest(c)))
         .collect()
 }
 
@@ -493,8 +493,8 @@ pub fn dynamic_frames(bytes: &[u8]) -> Vec<f32> {
 /// The lod3 scene as a still `CSOG` at preset medium with these importance tiers, with octree
 /// positions (layouts 2-4) or grid positions (layouts 0 and 1).
 /// The coarse-rotation vector's setting: a large factor, so every shift class occurs in lod3.
-pub const COARSE_ROTATIONS: dlgs::payload::sorted_grid::RotationCoarsening =
-    dlgs::payload::sorted_grid::RotationCoarsening {
+pub const COARSE_ROTATIONS: dlgs::chunks::csog::RotationCoarsening =
+    dlgs::chunks::csog::RotationCoarsening {
         factor: 16.0,
         max_shift: 4,
     };
@@ -502,11 +502,11 @@ pub const COARSE_ROTATIONS: dlgs::payload::sorted_grid::RotationCoarsening =
 /// Layout 0 (§6.5.2): `dlgs encode` no longer writes it (layout 1 stores an empty dynamic set
 /// in one byte), readers must still decode it. The sorted set at `medium`, in a still file.
 fn csog_layout0(g: &dlgs::Gaussians) -> Vec<u8> {
-    use dlgs::payload::sorted_grid::{self, QuantBits};
+    use dlgs::chunks::csog::{self, QuantBits};
     use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
     let sorted = permute(g, &grid_order(g, SortSpec::DEFAULT));
     let c = Canonical::from_static(sorted);
-    let payload = sorted_grid::encode(&c, &QuantBits::MEDIUM, 9).unwrap();
+    let payload = csog::encode(&c, &QuantBits::MEDIUM, 9).unwrap();
     let mut w = Writer::new(Vec::new(), SceneHeader::still(g.len() as u32, g.sh_degree)).unwrap();
     w.begin_gop().unwrap();
     w.gop_chunk(ChunkType::CSOG, FLAG_MUST_UNDERSTAND, &payload)
@@ -518,13 +518,13 @@ fn csog(
     g: &dlgs::Gaussians,
     tier_weights: Vec<f64>,
     octree_positions: bool,
-    rotation_coarsening: Option<dlgs::payload::sorted_grid::RotationCoarsening>,
+    rotation_coarsening: Option<dlgs::chunks::csog::RotationCoarsening>,
     compact_records: bool,
 ) -> Vec<u8> {
     use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
     let cfg = EncoderConfig {
         canonical: CanonicalCodec::Sorted {
-            bits: dlgs::payload::sorted_grid::QuantBits::MEDIUM,
+            bits: dlgs::chunks::csog::QuantBits::MEDIUM,
             sort: SortSpec::DEFAULT,
         },
         tier_weights,

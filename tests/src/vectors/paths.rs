@@ -3,12 +3,12 @@
 //! `RDLT` codec 2 (§6.7), `RNTC` scope 1 (§6.6.3), deform model 1 (§6.4), `TFEA` codecs 1
 //! and 2 (§6.2). [`claims`] checks that each vector still takes its path.
 
+use dlgs::chunks::csog::adaptive_coder::{self, Mode, Previous};
+use dlgs::chunks::csog::grid_coder::{self, GridCodec};
+use dlgs::chunks::csog::{self, grid_width, quantise_set, QuantBits};
+use dlgs::chunks::mlpw::WeightType;
 use dlgs::container::header::{DeformModel, ResidualMode};
 use dlgs::container::{ChunkType, FileReader, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
-use dlgs::payload::adaptive_coder::{self, Mode, Previous};
-use dlgs::payload::grid_coder::{self, GridCodec};
-use dlgs::payload::mlp_weights::WeightType;
-use dlgs::payload::sorted_grid::{self, grid_width, quantise_set, QuantBits};
 use dlgs::Gaussians;
 
 use super::Vector;
@@ -153,7 +153,7 @@ fn hevc() -> dlgs_encoder::FeatureCodec {
 /// then decode by codec 2's rule (`v16 / 65535`, not codec 1's `q / 4095`): the stored
 /// stream is what a reference-implementation model would carry.
 fn tfea_reference(scene: &Gaussians) -> Vec<u8> {
-    use dlgs::payload::time_features::{self, TfeaBody};
+    use dlgs::chunks::tfea::{self, TfeaBody};
     let (m, one) = small_dynamic(scene, hevc(), DeformModel::Reference, true);
     let mut r = FileReader::open(std::io::Cursor::new(&one)).unwrap();
     let s = r.scene().clone();
@@ -167,8 +167,7 @@ fn tfea_reference(scene: &Gaussians) -> Vec<u8> {
         let c = r.gop_chunks(g as u32).unwrap();
         let c = c.iter().find(|c| c.ty == ChunkType::TFEA).unwrap();
         let p = r.payload(c).unwrap();
-        let body =
-            time_features::decode(&p, c.payload_offset(), &s, &dlgs::Limits::default()).unwrap();
+        let body = tfea::decode(&p, c.payload_offset(), &s, &dlgs::Limits::default()).unwrap();
         let TfeaBody::Hevc {
             tiling,
             ranges,
@@ -256,8 +255,8 @@ fn rdlt_predictive(scene: &Gaussians) -> Vec<u8> {
 /// (scope 1) than with each segment's own: the first seed from 0 for which that holds (the
 /// encoder codes both ways and keeps the smaller, §6.6.3).
 fn rntc_grid_scope(scene: &Gaussians) -> Vec<u8> {
+    use dlgs::chunks::rntc::grid_report;
     use dlgs::model::ntc::NtcConfig;
-    use dlgs::payload::ntc_residual::grid_report;
     residual_scene(scene, Default::default(), |enc, m| {
         let small = NtcConfig {
             resolutions: vec![16, 32, 64, 128],
@@ -283,7 +282,7 @@ fn rntc_grid_scope(scene: &Gaussians) -> Vec<u8> {
             })
             .find(|f| {
                 let r = grid_report(f);
-                let sum = |f: fn(&dlgs::payload::ntc_residual::SegmentReport) -> usize| {
+                let sum = |f: fn(&dlgs::chunks::rntc::SegmentReport) -> usize| {
                     r.iter().map(f).sum::<usize>()
                 };
                 sum(|s| s.bytes_grid) < sum(|s| s.bytes_segment)
@@ -366,7 +365,7 @@ fn payloads(bytes: &[u8], ty: ChunkType) -> (SceneHeader, Vec<(u64, Vec<u8>)>) {
 fn csog_codings(bytes: &[u8]) -> Vec<String> {
     let (scene, ps) = payloads(bytes, ChunkType::CSOG);
     ps.iter()
-        .flat_map(|(at, p)| sorted_grid::describe(p, *at, &scene).unwrap().records)
+        .flat_map(|(at, p)| csog::describe(p, *at, &scene).unwrap().records)
         .map(|r| r.coding)
         .collect()
 }

@@ -9,14 +9,15 @@ use super::records::{
     bad_at, layout_of, read_parts, read_set, OctreeRecord, Record, SetForm, SetRecords,
 };
 use super::rotation_coarsening::{cells_by_shift, rotation_shift};
+use super::{kd_layout, octree_positions};
 use crate::bytes::ByteReader;
+use crate::chunks::csog::adaptive_coder::Mode;
+use crate::chunks::csog::grid_coder::{self, GridCodec};
 use crate::container::SceneHeader;
 use crate::error::Result;
 use crate::limits::Limits;
 use crate::model::{Canonical, Gaussians};
-use crate::payload::adaptive_coder::Mode;
-use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::{kd_layout, octree_positions, task_queue};
+use crate::task_queue;
 
 /// A set's records, read and split into chains, not yet decoded.
 struct SetPlan<'a> {

@@ -7,10 +7,10 @@ use super::rotation_coarsening::RotationCoarsening;
 use super::set_coder::{code_set, Channel, SetCoding};
 use super::{QuantBits, MAX_PARTS};
 use crate::bytes::PutLe;
+use crate::chunks::csog::grid_coder::{self, GridCodec};
+use crate::chunks::csog::half_range;
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::{Canonical, Gaussians};
-use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::half_range;
 
 /// Bytes of a channel record before its data in layouts 0-3: bits, codec, min, max, len
 /// (§6.5.2); [`breakdown`] counts records this way (layout 4's take 3-10, §6.5.7).

@@ -1,23 +1,14 @@
-//! Payload codecs of the chunk types the container carries (format-spec §6 onwards).
+//! The payload of each chunk type (format-spec §6), one module per chunk code: `craw` (§6.1),
+//! `tfea` (§6.2), `mlpw` (§6.3), `csog` (§6.5, with everything it is made of), `rntc` (§6.6),
+//! `rdlt` (§6.7), `laed` (§6.8). The entropy coders they share are in [`crate::entropy`].
 
-pub mod adaptive_coder;
-pub mod binary_bits;
-pub mod binary_range_decoder;
-pub mod bit_mixer;
-pub mod colour_lattice;
-pub mod delta_residual;
-pub mod grid_coder;
-pub mod grid_shaping;
-pub mod half_range;
-pub mod kd_layout;
-pub mod lang_decoder;
-pub mod mlp_weights;
-pub mod ntc_residual;
-pub mod octree_positions;
-pub mod raw_canonical;
-pub mod sorted_grid;
-pub mod task_queue;
-pub mod time_features;
+pub mod craw;
+pub mod csog;
+pub mod laed;
+pub mod mlpw;
+pub mod rdlt;
+pub mod rntc;
+pub mod tfea;
 
 use crate::container::{ChunkType, SceneHeader};
 use crate::{Canonical, Limits, Result};
@@ -40,8 +31,8 @@ pub fn decode_canonical(
     limits: &Limits,
 ) -> Option<Result<Canonical>> {
     match ty {
-        ChunkType::CRAW => Some(raw_canonical::decode(p, offset, scene, limits)),
-        ChunkType::CSOG => Some(sorted_grid::decode(p, offset, scene, limits)),
+        ChunkType::CRAW => Some(craw::decode(p, offset, scene, limits)),
+        ChunkType::CSOG => Some(csog::decode(p, offset, scene, limits)),
         _ => None,
     }
 }
@@ -59,14 +50,14 @@ pub fn decode_residual(
 ) -> Option<Result<(Canonical, Option<crate::model::ntc::NtcField>)>> {
     match ty {
         ChunkType::RNTC => Some((|| {
-            let field = ntc_residual::decode(p, offset, scene, limits)?;
+            let field = rntc::decode(p, offset, scene, limits)?;
             let next = field
                 .apply(base)
                 .map_err(|e| crate::Error::new(e.kind, offset))?;
             Ok((next, Some(field)))
         })()),
         ChunkType::RDLT => {
-            Some(delta_residual::decode(p, offset, scene, limits).map(|d| (d.apply(base), None)))
+            Some(rdlt::decode(p, offset, scene, limits).map(|d| (d.apply(base), None)))
         }
         _ => None,
     }

@@ -7,10 +7,10 @@ use rayon::prelude::*;
 
 use crate::bytes::{ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
+use crate::entropy::binary_bits;
 use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;
 use crate::model::ntc::{NtcConfig, NtcField, NtcMlp};
-use crate::payload::binary_bits;
 
 /// Largest plane level count, log2 table size and feature count a reader accepts (bounds the
 /// work a file can ask for: at most 3 * 8 * 2^20 * 8 bits).

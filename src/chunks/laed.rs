@@ -1,10 +1,10 @@
 //! `LAED`: the language autoencoder decoder and canonical negatives (format-spec §6.8).
 
 use crate::bytes::{zstd_exact, ByteReader, PutLe};
+use crate::chunks::mlpw::{WeightType, MAX_LAYERS, MAX_WIDTH};
 use crate::container::{ChunkType, SceneHeader};
 use crate::error::{Error, ErrorKind, Result};
 use crate::model::lang_decoder::{DenseLayer, LangDecoder, NamedEmbedding};
-use crate::payload::mlp_weights::{WeightType, MAX_LAYERS, MAX_WIDTH};
 use crate::Limits;
 
 /// Most negatives a reader accepts.

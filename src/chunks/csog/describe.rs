@@ -3,10 +3,10 @@
 use super::channels::channels;
 use super::records::{bad_at, layout_of, read_parts, read_set, Record, SetForm, SetRecords};
 use crate::bytes::ByteReader;
+use crate::chunks::csog::grid_coder::GridCodec;
 use crate::container::SceneHeader;
 use crate::error::Result;
 use crate::model::Gaussians;
-use crate::payload::grid_coder::GridCodec;
 
 /// One record of a `CSOG` payload: what it holds, how it is coded and how many bytes its data
 /// takes (for `dlgs info --channels`). Record heads, ranges and counts are not in `bytes`.

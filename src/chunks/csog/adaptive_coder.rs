@@ -21,10 +21,10 @@ use constriction::stream::model::{EncoderModel, EntropyModel};
 use constriction::stream::queue::DefaultRangeEncoder;
 use constriction::stream::Encode;
 
-use super::binary_range_decoder::BinaryRangeDecoder;
-use super::bit_mixer::Mixer;
 use super::grid_coder::{bad, class_of, neighbours, predict, read_words, zigzag};
 use crate::bytes::{ByteReader, PutLe};
+use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
+use crate::entropy::bit_mixer::Mixer;
 use crate::error::Result;
 
 /// Probability precision of the binary models.
@@ -211,7 +211,7 @@ pub enum Mode {
     Tree,
     /// Value tree whose every bit mixes the predictions of an order-0 model, a model in the
     /// context of the left and upper neighbours' top bits and, for `k > 0`, one in the context
-    /// of the previous channel's top `k` bits ([`bit_mixer`](super::bit_mixer), since 1.13).
+    /// of the previous channel's top `k` bits ([`bit_mixer`](crate::entropy::bit_mixer), since 1.13).
     Mixed(u8),
     /// As `Mixed(k)` with `k > 0`, plus a model in the context of the previous channel's top
     /// `k` bits together with the top `k2` bits of the channel before it (since 1.13): a

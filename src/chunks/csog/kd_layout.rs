@@ -3,7 +3,7 @@
 //! bits. Recursive median splits: a rectangle of the grid and the points it holds are halved
 //! along the rectangle's longer side, the points by the axis of largest extent in scene units.
 
-use super::sorted_grid::grid_width;
+use super::grid_width;
 
 /// Cells `0..n` of a `width`-wide grid inside the rectangle are those with row-major index < n.
 pub fn valid_in(x0: usize, y0: usize, w: usize, h: usize, width: usize, n: usize) -> usize {

@@ -3,12 +3,12 @@
 //! the sorted-grid channel coder (§6.5.3) when they fit 16 bits, else as byte-planed zstd.
 
 use crate::bytes::{ByteReader, PutLe};
+use crate::chunks::csog::grid_coder::{self, GridCodec};
+use crate::chunks::csog::grid_width;
 use crate::container::{ChunkType, SceneHeader};
 use crate::error::{Error, ErrorKind, Result};
 use crate::limits::Limits;
 use crate::model::residual::{AttrGroup, DeltaGroup, DeltaMode, DeltaResidual};
-use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::sorted_grid::grid_width;
 
 /// Channel codec id for deltas wider than 16 bits.
 const WIDE: u8 = 3;

@@ -1,7 +1,7 @@
 //! `CSOG`: canonical Gaussians as quantised attribute grids (format-spec §6.5). The encoder
 //! sorts each set so that grid neighbours are similar (`dlgs-encoder`'s grid sort); this module
 //! only quantises, lays every channel out as a `width`-wide grid in set order and codes it
-//! losslessly with [`grid_coder`](crate::payload::grid_coder). Decoding restores the quantised
+//! losslessly with [`grid_coder`](crate::chunks::csog::grid_coder). Decoding restores the quantised
 //! values exactly.
 //!
 //! - [`channels`]: what each channel holds, in payload order;
@@ -13,8 +13,15 @@
 //! - [`reader`]: the records decoded into Gaussians;
 //! - [`describe`]: the records summarised for reports.
 
+pub mod adaptive_coder;
 mod channels;
+pub mod colour_lattice;
 mod describe;
+pub mod grid_coder;
+pub mod grid_shaping;
+pub mod half_range;
+pub mod kd_layout;
+pub mod octree_positions;
 mod quantiser;
 mod reader;
 mod records;

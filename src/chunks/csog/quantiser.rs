@@ -2,7 +2,7 @@
 //! quantiser both directions share.
 
 use super::channels::Kind;
-use crate::payload::{colour_lattice, half_range};
+use super::{colour_lattice, half_range};
 
 /// Log-scales more than this below the channel's largest are raised to it before
 /// quantisation: an axis under e^-14 (~1e-6) of the largest Gaussian's is far below a pixel at

@@ -8,11 +8,11 @@ use super::quantiser::grid_width;
 use super::rotation_coarsening::MAX_ROTATION_SHIFT;
 use super::MAX_PARTS;
 use crate::bytes::{ByteReader, PutLe};
+use crate::chunks::csog::adaptive_coder::Mode;
+use crate::chunks::csog::grid_coder::GridCodec;
+use crate::chunks::csog::octree_positions;
 use crate::container::ChunkType;
 use crate::error::{Error, ErrorKind, Result};
-use crate::payload::adaptive_coder::Mode;
-use crate::payload::grid_coder::GridCodec;
-use crate::payload::octree_positions;
 
 pub(super) fn bad_at(reason: String, at: u64) -> Error {
     Error::new(

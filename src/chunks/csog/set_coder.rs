@@ -11,9 +11,9 @@ use super::rotation_coarsening::{
     cells_by_shift, coarsening_record, halvings, rotation_shift, RotationCoarsening,
 };
 use super::QuantBits;
+use super::{grid_shaping, kd_layout, octree_positions};
+use crate::chunks::csog::grid_coder::{self, GridCodec};
 use crate::model::Gaussians;
-use crate::payload::grid_coder::{self, GridCodec};
-use crate::payload::{grid_shaping, kd_layout, octree_positions};
 
 /// One channel as stored.
 pub(super) struct Channel {
@@ -276,7 +276,7 @@ fn shape_channels(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::payload::half_range;
+    use crate::chunks::csog::half_range;
 
     #[test]
     fn sh_bands_above_dc_keep_their_zeros_and_dc_keeps_its_range() {

@@ -43,7 +43,7 @@ pub fn range(v: &[f32], bits: u8) -> Option<(f32, f32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::payload::sorted_grid::{dequantise, quantise};
+    use crate::chunks::csog::{dequantise, quantise};
 
     #[test]
     fn colours_keep_their_value_when_bits_cover_their_spread() {

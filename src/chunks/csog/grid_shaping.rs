@@ -9,7 +9,7 @@
 //! histogram codecs pay little for a frequent value, of the channel (codec 3) or of its
 //! difference from the previous channel (codec 4).
 
-use crate::payload::grid_coder::{
+use crate::chunks::csog::grid_coder::{
     activity_threshold, class_of, context, neighbours, predict, zigzag,
 };
 
@@ -121,7 +121,7 @@ pub fn for_histogram(c: &Cells, base: Option<&[u16]>) -> Vec<u16> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::payload::grid_coder::{encode_histogram, encode_predictive};
+    use crate::chunks::csog::grid_coder::{encode_histogram, encode_predictive};
 
     /// A ramp plus 4 bits of noise, as exact values half a step off the levels.
     fn noisy(n: usize, seed: u32) -> (Vec<f32>, Vec<u16>) {
