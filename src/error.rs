@@ -2,7 +2,7 @@
 
 use std::fmt;
 
-use crate::container::ChunkType;
+use crate::container::chunk_type::ChunkType;
 
 /// What went wrong while reading or writing `.dlgs` (or a foreign splat file).
 ///

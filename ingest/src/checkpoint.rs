@@ -12,7 +12,7 @@ use dlgs::model::dynamic::{DeformMlps, MlpRole};
 use dlgs::model::TimeFeatures;
 use dlgs::Gaussians;
 
-use crate::run::{self, FeatureSource, RefGop, SetTensors, CHANNELS, KEYS, LANG};
+use crate::ref_gop::{self, FeatureSource, RefGop, SetTensors, CHANNELS, KEYS, LANG};
 use crate::torch::{self, Tensor};
 use crate::{check_finite, IngestError};
 
@@ -30,7 +30,7 @@ impl StateDict {
     fn open(dir: &Path, file: &str) -> Result<Self, IngestError> {
         let path = dir.join(file);
         let what = path.display().to_string();
-        let bytes = run::read(&path, "a checkpoint (the GOP has no compression_info.csv)")?;
+        let bytes = ref_gop::read(&path, "a checkpoint (the GOP has no compression_info.csv)")?;
         let tensors = torch::read_zip_state_dict(std::io::Cursor::new(bytes), &what)?
             .into_iter()
             .collect();
@@ -125,7 +125,7 @@ impl StateDict {
                 .tensors
                 .iter()
                 .filter_map(|(k, t)| Some((k.strip_prefix(&p)?, t)));
-            run::mlp_from_state(entries, role, &format!("{}: {prefix}", self.what))
+            ref_gop::mlp_from_state(entries, role, &format!("{}: {prefix}", self.what))
         };
         Ok(DeformMlps {
             deform: mlp("mlp_deform", MlpRole::Deform)?,
@@ -149,7 +149,7 @@ fn gop(
     dynamics: Gaussians,
     scale_offsets: bool,
 ) -> Result<RefGop, IngestError> {
-    run::check_sets(&statics, &dynamics, &sd.what)?;
+    ref_gop::check_sets(&statics, &dynamics, &sd.what)?;
     let language = statics.lang_width > 0;
     Ok(RefGop {
         dir: dir.to_path_buf(),

@@ -12,6 +12,7 @@ pub mod csv;
 pub mod jxl;
 pub mod latents;
 pub mod pickle;
+pub mod ref_gop;
 pub mod run;
 pub mod torch;
 

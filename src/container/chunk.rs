@@ -1,55 +1,9 @@
 //! Chunk framing (format-spec §3): a 24-byte header with its own CRC, the payload, and a
 //! CRC-32C of the payload.
 
-use std::fmt;
-
+pub use super::chunk_type::ChunkType;
 use crate::bytes::ByteReader;
 use crate::error::{Error, ErrorKind, Result};
-
-/// A four-byte chunk type, e.g. `HEAD`. Bytes are ASCII letters, digits, or space.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct ChunkType(pub [u8; 4]);
-
-impl ChunkType {
-    pub const HEAD: ChunkType = ChunkType(*b"HEAD");
-    pub const META: ChunkType = ChunkType(*b"META");
-    pub const GOPH: ChunkType = ChunkType(*b"GOPH");
-    pub const GIDX: ChunkType = ChunkType(*b"GIDX");
-    pub const TAIL: ChunkType = ChunkType(*b"TAIL");
-    /// Raw (uncompressed-float) canonical Gaussians, §6.1.
-    pub const CRAW: ChunkType = ChunkType(*b"CRAW");
-    pub const TFEA: ChunkType = ChunkType(*b"TFEA");
-    pub const MLPW: ChunkType = ChunkType(*b"MLPW");
-    /// Canonical Gaussians as quantised, sorted attribute grids, §6.5.
-    pub const CSOG: ChunkType = ChunkType(*b"CSOG");
-    /// Binary-voxel residual field against the reference GOP, §6.6.
-    pub const RNTC: ChunkType = ChunkType(*b"RNTC");
-    /// Explicit quantised per-attribute residual against the reference GOP, §6.7.
-    pub const RDLT: ChunkType = ChunkType(*b"RDLT");
-    /// Language autoencoder decoder and canonical negatives, for queries, §6.8.
-    pub const LAED: ChunkType = ChunkType(*b"LAED");
-
-    pub fn is_valid(bytes: [u8; 4]) -> bool {
-        bytes
-            .iter()
-            .all(|b| b.is_ascii_alphanumeric() || *b == b' ')
-    }
-    pub fn as_str(&self) -> &str {
-        std::str::from_utf8(&self.0).unwrap_or("????")
-    }
-}
-
-impl fmt::Display for ChunkType {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl fmt::Debug for ChunkType {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "ChunkType({})", self.as_str())
-    }
-}
 
 /// Flag bit 0: a reader that does not know this chunk type must stop with an error.
 pub const FLAG_MUST_UNDERSTAND: u16 = 1;

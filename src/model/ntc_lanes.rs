@@ -10,7 +10,7 @@
 
 use multiversion::multiversion;
 
-use super::ntc::{NtcConfig, NtcMlp, PLANES, PRIMES, WEIGHT_EPS};
+use super::ntc_config::{NtcConfig, NtcMlp, PLANES, PRIMES, WEIGHT_EPS};
 
 /// Rows evaluated together, one per SIMD lane.
 pub(super) const LANES: usize = 16;

@@ -21,7 +21,7 @@ use constriction::stream::model::{EncoderModel, EntropyModel};
 use constriction::stream::queue::DefaultRangeEncoder;
 use constriction::stream::Encode;
 
-use super::grid_coder::{bad, class_of, neighbours, predict, read_words, zigzag};
+use super::cells::{bad, class_of, neighbours, predict, read_words, zigzag};
 use crate::bytes::{ByteReader, PutLe};
 use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
 use crate::entropy::bit_mixer::Mixer;

@@ -9,9 +9,7 @@
 //! histogram codecs pay little for a frequent value, of the channel (codec 3) or of its
 //! difference from the previous channel (codec 4).
 
-use crate::chunks::csog::grid_coder::{
-    activity_threshold, class_of, context, neighbours, predict, zigzag,
-};
+use super::cells::{activity_threshold, class_of, context, neighbours, predict, zigzag};
 
 /// Farthest a cell moves from its nearest value, in steps.
 pub const MAX_MOVE: u16 = 4;

@@ -14,6 +14,7 @@
 //! - [`describe`]: the records summarised for reports.
 
 pub mod adaptive_coder;
+mod cells;
 mod channels;
 pub mod colour_lattice;
 mod describe;

@@ -14,7 +14,7 @@
 use constriction::stream::queue::DefaultRangeEncoder;
 
 use super::adaptive_coder::{open_stream, Adaptive, BitCoder, Decoder, Encoder};
-use super::grid_coder::bad;
+use super::cells::bad;
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::Result;
 
