@@ -11,7 +11,7 @@ OUT=out/demo
 mkdir -p "$OUT"
 B=target/release/dlgs
 echo "== encode $SCENE"
-$B encode "$SCENE" -o "$OUT/scene.dlgs"
+$B encode "$SCENE" -o "$OUT/scene.dlgs" --quality lossless
 echo "== info"
 $B info "$OUT/scene.dlgs"
 $B verify "$OUT/scene.dlgs"
@@ -62,7 +62,7 @@ echo "== open-vocabulary query on the real fruit-drops scene with its REAL per-G
 echo "   (SYNTHETIC language: one code per category and a constructed decoder; no CLIP model here)"
 FRUIT="$DATA/ply/supersplat_fruit_drops_minimal_4721_sh3.ply"
 $B labels "$FRUIT" --annotations "$DATA/ply/supersplat_fruit_drops_minimal.annotations.json" -o "$OUT/labels" | tail -3
-$B encode "$OUT/labels/scene.ply" -o "$OUT/labels.dlgs" --lang-decoder "$OUT/labels/lang_decoder.safetensors" --negatives "$OUT/labels/negatives.npy"
+$B encode "$OUT/labels/scene.ply" -o "$OUT/labels.dlgs" --quality lossless --lang-decoder "$OUT/labels/lang_decoder.safetensors" --negatives "$OUT/labels/negatives.npy"
 $B query "$OUT/labels.dlgs" --text-embedding "$OUT/labels/category_4.npy" --view 0 -o "$OUT/query/category_4" --timing
 $B export "$OUT/labels.dlgs" --select "$OUT/labels/category_4.npy" -o "$OUT/query/category_4.ply"
 echo "== players: stream the 5-GOP residual file in real time, export frames as SPZ for other viewers"

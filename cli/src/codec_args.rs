@@ -21,10 +21,14 @@ use dlgs_encoder::{
 pub struct CodecArgs {
     /// Canonical Gaussians: `lossless` (f32, CRAW) or sorted quantised grids (CSOG) at preset
     /// `near-lossless`, `high`, `medium` or `low` (bits per attribute in format-spec §6.5).
-    /// `near-lossless` also stores the decoders in f16 (as `--mlp-f16`): on the reference-run
-    /// fixture it renders at >= 64 dB against the lossless model (docs/benchmarks/ingest.md).
-    #[arg(long, default_value = "lossless")]
-    pub quality: String,
+    /// Default: `high` for a still scene (PLY, SPZ, .splat or SOG in: 54-55 dB against the
+    /// source at 56-79 % of PlayCanvas SOG's bytes on the real tiles in
+    /// docs/benchmarks/canonical.md), `lossless` when re-encoding a `.dlgs`, for `ingest` and
+    /// for `synth` (the model's own values). `near-lossless` also stores the
+    /// decoders in f16 (as `--mlp-f16`): on the reference-run fixture it renders at >= 64 dB
+    /// against the lossless model (docs/benchmarks/ingest.md).
+    #[arg(long, value_name = "QUALITY")]
+    pub quality: Option<String>,
     /// Override quantisation bits, e.g. `position=15,sh_rest=5` (keys: position, log_scale,
     /// rotation, opacity, sh_dc, sh_rest (SH band 1), sh_high (SH bands 2-3), lang). Implies grid coding (preset `high` if
     /// `--quality lossless`).
@@ -34,12 +38,12 @@ pub struct CodecArgs {
     /// = the k-d layout only: fastest and, on every real scene measured, the smallest files;
     /// refinement smooths colours at the cost of position coherence
     /// (docs/benchmarks/canonical-levers.md "Grid sort").
-    #[arg(long, default_value_t = 0)]
+    #[arg(help_heading = "Canonical coding (expert)", long, default_value_t = 0)]
     pub sort_passes: u32,
     /// Keep each static Gaussian's rotation as given. By default, scenes without residual GOPs
     /// store, among the 24 (rotation, axis order) pairs that give the same ellipsoid, the one
     /// closest to the identity: same rendering, 2-4 bits less per Gaussian.
-    #[arg(long)]
+    #[arg(help_heading = "Canonical coding (expert)", long)]
     pub keep_orientation: bool,
     /// Store the static Gaussians' positions as grid channels, in the grid sort's order
     /// (layout 1), as files before format 1.10. By default they are an octree and the
@@ -48,7 +52,7 @@ pub struct CodecArgs {
     /// grid positions decode faster (273k Gaussians at `high`: 161-186 ms instead of 238-253,
     /// in a 6.5 % larger file that also keeps every rotation at full bits;
     /// docs/benchmarks/decode.md "The 273k scene by format")
-    #[arg(long)]
+    #[arg(help_heading = "Canonical coding (expert)", long)]
     pub grid_positions: bool,
     /// Octree positions: store the rotation of each Gaussian too small for one rotation step
     /// to move its surface by FACTOR position steps up to 4 bits coarser, one bit per halving
@@ -57,17 +61,21 @@ pub struct CodecArgs {
     /// 1-4 % smaller for 0.00-0.33 dB (docs/benchmarks/canonical-levers.md "Coarse rotations");
     /// 2 saves about twice
     /// as much for up to 1.7 dB. [default: 1, or 0 with --grid-positions]
-    #[arg(long, value_name = "FACTOR")]
+    #[arg(
+        help_heading = "Canonical coding (expert)",
+        long,
+        value_name = "FACTOR"
+    )]
     pub coarse_rotations: Option<f32>,
     /// Keep the Gaussians no renderer draws. By default a lossy (`--quality` other than
     /// `lossless`) still scene leaves out every Gaussian whose opacities are below 1/255: they
     /// never reach the 1/255 alpha at which 3DGS compositing starts, so no pixel changes.
-    #[arg(long)]
+    #[arg(help_heading = "Canonical coding (expert)", long)]
     pub keep_invisible: bool,
     /// Keep the input's SH degree. By default a lossy still scene is stored only up to the
     /// highest SH band that holds a non-zero coefficient (the gs3d tiles declare degree 3 with
     /// bands 1-3 zero everywhere): zero bands add nothing to any colour, so no pixel changes.
-    #[arg(long)]
+    #[arg(help_heading = "Canonical coding (expert)", long)]
     pub keep_sh_degree: bool,
     /// Write no `META` chunk: no encoder name, input file name or settings in the file (about
     /// 200 bytes on a still scene; nothing a reader needs to decode). For files whose source
@@ -80,20 +88,29 @@ pub struct CodecArgs {
     /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores;
     /// docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Format unchanged: every
     /// reader decodes both.
-    #[arg(long, conflicts_with = "mixed_margin")]
+    #[arg(
+        help_heading = "Canonical coding (expert)",
+        long,
+        conflicts_with = "mixed_margin"
+    )]
     pub fast_decode: bool,
     /// Lossy canonical coding: a channel takes codec 5's mixed-context modes only where they
     /// are this many percent smaller than its best other coding. Between the default and
     /// `--fast-decode`: the plant's goal row is 0.3 % larger with 2 and decodes 27 % faster,
     /// 1.2 % larger with 5 and 43 % faster; the 273k scene's 0.2 % and 16 %, 1.1 % and 35 %
     /// (docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Same values, same PSNR.
-    #[arg(long, value_name = "PERCENT", default_value_t = 100.0 * grid_coder::MIXED_MARGIN)]
+    #[arg(help_heading = "Canonical coding (expert)", long, value_name = "PERCENT", default_value_t = 100.0 * grid_coder::MIXED_MARGIN)]
     pub mixed_margin: f64,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
     /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
     /// candidates.
-    #[arg(long, value_name = "MOVES", default_value_t = 0)]
+    #[arg(
+        help_heading = "Still scenes: smaller files at the same quality (slower encodes)",
+        long,
+        value_name = "MOVES",
+        default_value_t = 0
+    )]
     pub reallocate_bits: usize,
     /// Lossy still scenes: store each quantised level, among the 9 nearest the value, with the
     /// least estimated bits plus squared error weighted by the Gaussian's importance (blending
@@ -102,7 +119,12 @@ pub struct CodecArgs {
     /// views; views unlike the importance pass's lose more
     /// (docs/benchmarks/canonical.md "Level shaping"). Costs 36 renders
     /// at 640x480.
-    #[arg(long, value_name = "TOL", default_value_t = 0.0)]
+    #[arg(
+        help_heading = "Still scenes: smaller files at the same quality (slower encodes)",
+        long,
+        value_name = "TOL",
+        default_value_t = 0.0
+    )]
     pub shape: f64,
     /// Lossy still scenes: store the least important Gaussians (blending weight over 36 views
     /// of its own), which together hold at most FRACTION of the total weight, as a second grid
@@ -110,6 +132,7 @@ pub struct CodecArgs {
     /// smaller, add grids 2, 3, .. bits coarser (`0.04,0.004`). 0 = one grid. Costs 36 renders
     /// at 640x480. With --shape, every grid is shaped.
     #[arg(
+        help_heading = "Still scenes: smaller files at the same quality (slower encodes)",
         long,
         value_name = "FRACTION[,FRACTION..]",
         value_delimiter = ',',
@@ -125,7 +148,10 @@ pub struct CodecArgs {
     /// Codes the scene three
     /// times, plus the fit. With --target-psnr: the search's closest candidates below the target are
     /// also tried with the refit (at most 4, each with the cost above).
-    #[arg(long)]
+    #[arg(
+        help_heading = "Still scenes: smaller files at the same quality (slower encodes)",
+        long
+    )]
     pub refit_colours: bool,
     /// With --refit-colours: before the colours, move each Gaussian's stored opacity along its
     /// quantiser's levels so the decoded scene renders closer to the source from the same 36
@@ -133,12 +159,20 @@ pub struct CodecArgs {
     /// colours to those opacities. The judge weighs this refit and the colours refit alone and
     /// stores the best, if it beats the first coding
     /// (docs/benchmarks/canonical-levers.md "Opacity refit").
-    #[arg(long, requires = "refit_colours")]
+    #[arg(
+        help_heading = "Still scenes: smaller files at the same quality (slower encodes)",
+        long,
+        requires = "refit_colours"
+    )]
     pub refit_opacities: bool,
     /// With --refit-colours: fit to the 36 views at 640x480 instead of 320x240: about 5x the
     /// fit's time, 0.1-0.3 dB on the real scenes' goal rows
     /// (docs/benchmarks/canonical-levers.md "Opacity refit").
-    #[arg(long, requires = "refit_colours")]
+    #[arg(
+        help_heading = "Still scenes: smaller files at the same quality (slower encodes)",
+        long,
+        requires = "refit_colours"
+    )]
     pub refit_full_size: bool,
     /// Still scenes: the smallest file whose PSNR reaches DB. Codes the scene at every preset
     /// under 6 tier settings (none to `0.5,0.2`), decodes and renders each candidate from 12
@@ -157,57 +191,87 @@ pub struct CodecArgs {
     )]
     pub target_psnr: Option<f64>,
     /// Store raw canonical floats without zstd.
-    #[arg(long)]
+    #[arg(help_heading = "Canonical coding (expert)", long)]
     pub no_zstd: bool,
     /// zstd level for raw canonical, exact features and MLP chunks.
-    #[arg(long, default_value_t = 9)]
+    #[arg(help_heading = "Canonical coding (expert)", long, default_value_t = 9)]
     pub zstd_level: i32,
     /// x265 constant rate factor for the time-feature video (the reference uses 6).
-    #[arg(long, default_value_t = 6)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long,
+        default_value_t = 6
+    )]
     pub crf: u8,
     /// x265 preset (ultrafast .. placebo).
-    #[arg(long, default_value = "medium")]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long,
+        default_value = "medium"
+    )]
     pub preset: String,
     /// Lossless HEVC: the 12-bit quantised features exactly.
-    #[arg(long)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
     pub lossless_features: bool,
     /// Code every time-feature key as its own intra picture (`TFEA` codec 3), so a seek decodes
     /// the 2 keys around t instead of the GOP's 7. Bytes and error at the same crf, and the
     /// seek time it buys, are in docs/benchmarks/residuals-seek.md ("Seek latency").
-    #[arg(long)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
     pub intra_features: bool,
     /// Store time features as exact f32 (zstd) instead of HEVC.
-    #[arg(long)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
     pub exact_features: bool,
     /// One quantisation range for all 16 channels, as the reference (default: per channel).
-    #[arg(long)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
     pub per_gop_range: bool,
     /// Store MLP weights as f16 (default f32).
-    #[arg(long)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
     pub mlp_f16: bool,
     /// Error bounds of explicit residuals (RDLT) per attribute group, e.g.
     /// `position=1e-4,sh_rest=0.01,lang=exact` (groups: position, log_scale, rotation, sh_dc,
     /// sh_rest, opacity, lang_opacity, lang). Unlisted groups are exact (bit-identical).
-    #[arg(long)]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
     pub residual_error: Option<String>,
     /// Binary voxel residual fields (RNTC) of the input: `keep` them, `recode` residual GOPs
     /// as explicit residuals against the input's decoded states, or `auto` (default): keep
     /// when the canonical coding is lossless; recode when it is lossy, because a field is a
     /// function of position and GOP 0's quantised positions would query it elsewhere.
-    #[arg(long, default_value = "auto")]
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long,
+        default_value = "auto"
+    )]
     pub ntc: String,
     /// The scene's language autoencoder decoder (safetensors with `decoder.<i>.weight/bias`,
     /// see docs/queries.md), stored in the file (LAED chunk) so that players can answer text
     /// queries. When re-encoding a .dlgs, its decoder is kept unless this is given.
-    #[arg(long)]
+    #[arg(help_heading = "Language (queries)", long)]
     pub lang_decoder: Option<PathBuf>,
     /// Canonical negative text embeddings (.npy (K, D) or JSON) stored with the decoder
     /// (the reference uses CLIP's "object", "things", "stuff", "texture").
-    #[arg(long)]
+    #[arg(help_heading = "Language (queries)", long)]
     pub negatives: Option<PathBuf>,
     /// Store the language decoder in f32 (default f16: half the bytes; effect on relevance
     /// in docs/benchmarks/queries.md).
-    #[arg(long)]
+    #[arg(help_heading = "Language (queries)", long)]
     pub lang_decoder_f32: bool,
 }
 
@@ -265,13 +329,27 @@ impl CodecArgs {
         Ok(Some(m / 100.0))
     }
 
+    /// The `--quality` given, or `lossless` (the default but for still scenes; see
+    /// [`Self::defaulting_quality`]).
+    pub fn quality(&self) -> &str {
+        self.quality.as_deref().unwrap_or("lossless")
+    }
+
+    /// These settings with `quality` where `--quality` was not given (still scenes: `high`).
+    pub fn defaulting_quality(&self, quality: &str) -> CodecArgs {
+        CodecArgs {
+            quality: self.quality.clone().or_else(|| Some(quality.to_owned())),
+            ..self.clone()
+        }
+    }
+
     /// Whether `--tiers` asks for more than one grid.
     pub(crate) fn tiered(&self) -> bool {
         self.tiers.iter().any(|&f| f > 0.0)
     }
 
     pub(crate) fn canonical(&self) -> Result<CanonicalCodec> {
-        let mut bits = match (self.quality.as_str(), &self.bits) {
+        let mut bits = match (self.quality(), &self.bits) {
             ("lossless", None) if self.shape > 0.0 => {
                 bail!("--shape chooses quantised levels: give a lossy --quality (or --bits)")
             }
@@ -423,7 +501,7 @@ impl CodecArgs {
                 })
             },
             per_gop_range: self.per_gop_range,
-            mlp_weights: if self.mlp_f16 || self.quality == "near-lossless" {
+            mlp_weights: if self.mlp_f16 || self.quality() == "near-lossless" {
                 WeightType::F16
             } else {
                 WeightType::F32

@@ -89,7 +89,7 @@ fn encode_to_target(
     // The search sets the bits itself; a lossy preset here only lets the rest be checked.
     let base = CodecArgs {
         target_psnr: None,
-        quality: "high".into(),
+        quality: Some("high".into()),
         ..codec.clone()
     };
     let cfg = base.config(meta)?;
@@ -208,6 +208,8 @@ pub fn encode_file(
     let pending = PendingFile::create(output)?;
     let mut out = pending.writer()?;
     if !is_dlgs(input) {
+        // A still scene is coded lossy unless asked otherwise (`--quality lossless`).
+        let codec = &codec.defaulting_quality("high");
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
         if let Some(target) = codec.target_psnr {

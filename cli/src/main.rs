@@ -49,13 +49,15 @@ enum Cmd {
     },
     /// Read every chunk of a .dlgs file and check every CRC and index entry.
     Verify { file: PathBuf },
-    /// Encode a splat scene (PLY, .splat, SPZ, PlayCanvas SOG) into a single-frame .dlgs, re-encode a .dlgs
-    /// stream (e.g. a lossless `dlgs synth` model) with other settings, or re-pack a model
-    /// trained with the DLGStream reference implementation: give its GOP output folders (each
-    /// `gop<g>_<postfix>` or its `compression/best/jxl_quant`, in GOP order) or the scene
-    /// folder holding them. Lossless by default (decodes to the reference decoder's tensors).
-    /// A GOP folder without `compression_info.csv` is read from its checkpoint (`model.pth`,
-    /// GOP >= 1 `model_offset.pth`); where both exist the compressed files win.
+    /// Encode a splat scene (PLY, .splat, SPZ, PlayCanvas SOG) into a single-frame .dlgs
+    /// (`--quality high` by default: visually lossless; `--quality lossless` keeps every
+    /// float), re-encode a .dlgs stream with other settings (lossless canonical by default),
+    /// or re-pack a model trained with the DLGStream reference implementation: give its GOP
+    /// output folders (each `gop<g>_<postfix>` or its `compression/best/jxl_quant`, in GOP
+    /// order) or the scene folder holding them (lossless by default: decodes to the reference
+    /// decoder's tensors). A GOP folder without `compression_info.csv` is read from its
+    /// checkpoint (`model.pth`, GOP >= 1 `model_offset.pth`); where both exist the compressed
+    /// files win. `-h` lists the options by group; `--help` explains each.
     Encode {
         #[arg(required = true, num_args = 1..)]
         input: Vec<PathBuf>,

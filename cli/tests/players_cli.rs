@@ -373,7 +373,14 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
             assert!(text.contains(says), "{says}: {text}");
         }
     }
-    let err = dlgs_fails(&["encode", scene, "-o", &path("x.dlgs"), "--fast-decode"]);
+    let lossless = ["--quality", "lossless"];
+    let err = dlgs_fails(
+        &[
+            &["encode", scene, "-o", &path("x.dlgs"), "--fast-decode"],
+            &lossless[..],
+        ]
+        .concat(),
+    );
     assert!(err.contains("lossy --quality"), "{err}");
 
     // `--mixed-margin`: between the two. A 5 % margin lets fewer channels take the mixed
@@ -409,7 +416,16 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
     assert!(err.contains("cannot be used with"), "{err}");
     let err = dlgs_fails(&[&e[..], &[&x, "--mixed-margin", "200"]].concat());
     assert!(err.contains("from 0 to 100"), "{err}");
-    let err = dlgs_fails(&["encode", scene, "-o", &x, "--mixed-margin", "5"]);
+    let err = dlgs_fails(&[
+        "encode",
+        scene,
+        "-o",
+        &x,
+        "--mixed-margin",
+        "5",
+        "--quality",
+        "lossless",
+    ]);
     assert!(err.contains("lossy --quality"), "{err}");
 }
 
@@ -464,7 +480,15 @@ fn a_failed_encode_leaves_no_file_and_an_in_place_re_encode_reads_its_input_firs
     // Rejected settings: nothing is created, not even an empty file or a temporary one.
     let err = dlgs_fails(&["encode", scene, "-o", out_s, "--tiers", "0.1,0.2"]);
     assert!(err.contains("must not increase"), "{err}");
-    let err = dlgs_fails(&["encode", scene, "-o", out_s, "--refit-colours"]);
+    let err = dlgs_fails(&[
+        "encode",
+        scene,
+        "-o",
+        out_s,
+        "--refit-colours",
+        "--quality",
+        "lossless",
+    ]);
     assert!(
         err.contains("--refit-colours refits the colours of a lossy coding"),
         "{err}"
@@ -686,4 +710,63 @@ fn a_real_sog_frame_encodes_and_compares_bundled_or_not() {
     std::fs::write(path("bad.sog"), b"PK\x03\x04 not a zip").unwrap();
     let err = dlgs_fails(&["encode", &path("bad.sog"), "-o", &path("c.dlgs")]);
     assert!(err.contains("SOG: not a readable zip"), "{err}");
+}
+
+#[test]
+fn still_scenes_encode_lossy_by_default_and_streams_stay_lossless() {
+    // A codec asked to encode a still scene gives a visually lossless file (preset `high`);
+    // `--quality lossless` keeps every float; re-encoding a `.dlgs` keeps its values.
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = dlgs_tests::data(SCENE);
+    let scene = scene.to_str().unwrap();
+    let path = |n: &str| tmp.path().join(n).to_str().unwrap().to_owned();
+    let canonical_chunk = |f: &str| {
+        let info: serde_json::Value = serde_json::from_str(&dlgs(&["info", f, "--json"])).unwrap();
+        let gop = &info["chunk_bytes_by_type"];
+        ["CSOG", "CRAW"]
+            .into_iter()
+            .find(|c| gop.get(c).is_some())
+            .unwrap_or_else(|| panic!("{info}"))
+    };
+    dlgs(&["encode", scene, "-o", &path("default.dlgs"), "--no-meta"]);
+    dlgs(&[
+        "encode",
+        scene,
+        "-o",
+        &path("high.dlgs"),
+        "--no-meta",
+        "--quality",
+        "high",
+    ]);
+    dlgs(&[
+        "encode",
+        scene,
+        "-o",
+        &path("exact.dlgs"),
+        "--quality",
+        "lossless",
+    ]);
+    assert_eq!(canonical_chunk(&path("default.dlgs")), "CSOG");
+    assert!(
+        std::fs::read(path("default.dlgs")).unwrap() == std::fs::read(path("high.dlgs")).unwrap(),
+        "the default is `--quality high`"
+    );
+    assert_eq!(canonical_chunk(&path("exact.dlgs")), "CRAW");
+    let size = |f: &str| std::fs::metadata(f).unwrap().len();
+    assert!(size(&path("default.dlgs")) * 3 < size(&path("exact.dlgs")));
+    let cmp = dlgs(&[
+        "compare",
+        scene,
+        &path("default.dlgs"),
+        "--json",
+        "--orbit",
+        "2",
+    ]);
+    let psnr = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+        .as_f64()
+        .unwrap();
+    assert!(psnr > 45.0, "{psnr} dB");
+    // Re-encoding a stream without --quality keeps the canonical floats.
+    dlgs(&["encode", &path("exact.dlgs"), "-o", &path("again.dlgs")]);
+    assert_eq!(canonical_chunk(&path("again.dlgs")), "CRAW");
 }
