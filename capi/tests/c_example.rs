@@ -8,8 +8,8 @@ use std::process::Command;
 
 use dlgs::container::ResidualMode;
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_encoder::EncoderConfig;
+use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 
 const SCENE: &str = "ply/gs3d-fork_lod3_tile_0_1971_sh3.ply";
 

@@ -7,12 +7,12 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::Gaussians;
-use dlgs_query::labels::{read_point_annotations, LabelCodebook};
 use dlgs_query::{
     decoder_io, embeddings, images, query_levels, read_embeddings, select_gaussians, Embeddings,
     MaskParams, Precision, RelevanceField,
 };
 use dlgs_render::{render, RenderOptions};
+use dlgs_testkit::labels::{read_point_annotations, LabelCodebook};
 
 use crate::cameras_arg::CameraArgs;
 use crate::scene_io::Source;
@@ -413,7 +413,7 @@ pub fn run_labels(a: &LabelsArgs) -> Result<()> {
     std::fs::write(&scene_out, dlgs::interop::ply::write_ply(&lg)?)?;
     decoder_io::save_lang_decoder(&a.output.join("lang_decoder.safetensors"), &book.decoder)?;
     embeddings::write_npy(&a.output.join("negatives.npy"), &book.negatives())?;
-    let mut counts = [0usize; dlgs_query::labels::MAX_CATEGORIES];
+    let mut counts = [0usize; dlgs_testkit::labels::MAX_CATEGORIES];
     for &l in &labels {
         counts[l as usize] += 1;
     }

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::container::header::DeformModel;
-use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
 use dlgs_encoder::{GopCanonical, StreamEncoder};
+use dlgs_testkit::synth::{synth_dynamic, SynthSpec};
 
 use crate::codec_args::{parse_residual_mode, CodecArgs};
 use crate::encode_cmd::{bar, meta, report};

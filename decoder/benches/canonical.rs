@@ -15,8 +15,8 @@ use dlgs::model::ntc::NtcConfig;
 use dlgs::model::Canonical;
 use dlgs::Limits;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
-use dlgs_encoder::synth::synth_ntc;
-use dlgs_render::bench_scenes::plant;
+use dlgs_testkit::bench_scenes::plant;
+use dlgs_testkit::synth::synth_ntc;
 
 fn bench(c: &mut Criterion) {
     let g = plant();

@@ -10,9 +10,9 @@ use std::time::Instant;
 use criterion::{criterion_group, criterion_main, Criterion};
 use dlgs::Limits;
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_encoder::{EncoderConfig, FeatureCodec};
-use dlgs_render::bench_scenes::plant;
+use dlgs_testkit::bench_scenes::plant;
+use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 
 fn bench(c: &mut Criterion) {
     let spec = SynthSpec {

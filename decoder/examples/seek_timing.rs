@@ -2,7 +2,7 @@
 //! `cargo run --release -p dlgs-decoder --example seek_timing [-- exact | intra]` (`intra`:
 //! intra-only HEVC time features, `TFEA` codec 3, written to target/seek-{mode}-intra.dlgs).
 //!
-//! The scene is the 272,920-Gaussian side-by-side capture of `dlgs_render::bench_scenes::big`
+//! The scene is the 272,920-Gaussian side-by-side capture of `dlgs_testkit::bench_scenes::big`
 //! (real scenes), made dynamic by the SYNTHETIC generator (30 % dynamic) over 5 GOPs of 60
 //! frames, GOPs 1-4 carrying GENERATED binary voxel residual fields (no trained DLGStream model
 //! exists here). Files are written to target/seek-{mode}.dlgs, so `dlgs seek` can be run on
@@ -15,9 +15,9 @@ use std::time::Instant;
 use dlgs::container::header::ResidualMode;
 use dlgs::Limits;
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_encoder::{EncoderConfig, FeatureCodec, HevcSettings};
-use dlgs_render::bench_scenes::big;
+use dlgs_testkit::bench_scenes::big;
+use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 
 fn main() {
     let hevc = !std::env::args().any(|a| a == "exact");

@@ -13,7 +13,6 @@ pub mod importance;
 pub mod invisible;
 pub mod orientation;
 pub mod quality_search;
-pub mod synth;
 pub mod zero_bands;
 
 use std::io::Write;

@@ -9,12 +9,10 @@
 //! selection. Nothing here runs unless a query asks for it.
 
 pub mod batch_decode;
-pub mod code_layout;
 pub mod decoder_io;
 pub mod embeddings;
 pub mod error;
 pub mod images;
-pub mod labels;
 pub mod mask;
 pub mod relevance;
 pub mod select;

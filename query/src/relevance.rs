@@ -336,16 +336,43 @@ impl CosineTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::labels::LabelCodebook;
+    use dlgs::model::lang_decoder::{DenseLayer, NamedEmbedding};
+
+    /// A 3 -> 8 -> 16 decoder with random weights, a random unit text embedding and two
+    /// random negatives.
+    fn small_decoder(rng: &mut fastrand::Rng) -> (LangDecoder, Embeddings) {
+        let mut layer = |inputs: usize, outputs: usize| DenseLayer {
+            inputs,
+            outputs,
+            weight: (0..inputs * outputs)
+                .map(|_| rng.f32() * 2.0 - 1.0)
+                .collect(),
+            bias: (0..outputs).map(|_| rng.f32() * 0.2 - 0.1).collect(),
+        };
+        let layers = vec![layer(3, 8), layer(8, 16)];
+        let mut unit = || {
+            let v: Vec<f32> = (0..16).map(|_| rng.f32() * 2.0 - 1.0).collect();
+            let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+            v.into_iter().map(|x| x / n).collect::<Vec<f32>>()
+        };
+        let negatives = ["object", "things"]
+            .map(|name| NamedEmbedding {
+                name: name.into(),
+                values: unit(),
+            })
+            .to_vec();
+        let positives = Embeddings::from_rows(vec!["query".into()], vec![unit()]).unwrap();
+        (LangDecoder { layers, negatives }, positives)
+    }
 
     /// The zero-row shortcut gives exactly what scoring every row gives, with the table and
     /// with exact decoding, for zero rows anywhere (first, last, runs) and -0.0 rows (scored
     /// normally).
     #[test]
     fn zero_rows_shortcut_changes_no_value() {
-        let book = LabelCodebook::new(5);
-        let positives = book.category_embedding(3);
         let mut rng = fastrand::Rng::with_seed(9);
+        let (decoder, positives) = small_decoder(&mut rng);
+        let negatives = Embeddings::from_named(&decoder.negatives).unwrap();
         let mut features = Vec::new();
         for i in 0..5000 {
             let zero = i == 0 || i == 4999 || (1000..1400).contains(&i) || rng.f32() < 0.5;
@@ -355,9 +382,7 @@ mod tests {
         }
         features[3 * 2500..3 * 2501].copy_from_slice(&[-0.0, -0.0, -0.0]);
         for precision in [Precision::Table(24), Precision::Exact] {
-            let field =
-                RelevanceField::new(&book.decoder, &positives, &book.negatives(), precision)
-                    .unwrap();
+            let field = RelevanceField::new(&decoder, &positives, &negatives, precision).unwrap();
             field.prepare(&features);
             let shortcut = field.relevance(&features);
             let every_row = field.scores(&features);

@@ -2,8 +2,8 @@
 //! 1 and 2 threads. `cargo bench -p dlgs-render`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use dlgs_render::bench_scenes::{big, plant, with_language};
 use dlgs_render::{orbit_cameras, render, OrbitSpec, RenderOptions};
+use dlgs_testkit::bench_scenes::{big, plant, with_language};
 
 fn bench(c: &mut Criterion) {
     let scenes = [("plant_114k", plant()), ("sidebyside_273k", big())];

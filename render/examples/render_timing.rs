@@ -1,8 +1,8 @@
 //! Where the render time goes: per-stage milliseconds and work counts on the bench scenes.
 //! `cargo run --release -p dlgs-render --example render_timing`
 
-use dlgs_render::bench_scenes::{big, plant, with_language};
 use dlgs_render::{orbit_cameras, render, OrbitSpec, RenderOptions};
+use dlgs_testkit::bench_scenes::{big, plant, with_language};
 
 fn main() {
     for (name, g) in [("plant_114k", plant()), ("sidebyside_273k", big())] {

@@ -5,7 +5,7 @@
 //! plant in another order):
 //! `cargo run --release -p dlgs-render --example write_big_scene -- [--mosaic | --shuffled-copy] target/big.ply`.
 
-use dlgs_render::bench_scenes::{big, big_copy_shuffled, mosaic};
+use dlgs_testkit::bench_scenes::{big, big_copy_shuffled, mosaic};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -5,7 +5,6 @@
 //! (projection is per Gaussian, binning is sequential in depth order, each tile is composited
 //! by one thread).
 
-pub mod bench_scenes;
 pub mod camera;
 pub mod colour_fit;
 pub mod contribution;

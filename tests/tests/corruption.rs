@@ -131,8 +131,8 @@ fn decode_dynamic(bytes: &[u8]) -> dlgs::Result<dlgs::Gaussians> {
 /// trained DLGStream model exists here), exact and HEVC time features.
 #[test]
 fn damage_to_a_dynamic_file_is_detected_or_harmless() {
-    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
     use dlgs_encoder::{EncoderConfig, FeatureCodec, HevcSettings};
+    use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
     let g = load("tiny/metalsplatter_3-points-from-train.ply");
     let spec = SynthSpec {
         dynamic_fraction: 0.5,

@@ -2,7 +2,7 @@
 //! frames at and between frame times.
 //!
 //! NOTE: no real trained DLGStream model exists in this repository's data. Every dynamic model
-//! here is built by `dlgs_encoder::synth` from a REAL canonical scene in ../shared/data (a
+//! here is built by `dlgs_testkit::synth` from a REAL canonical scene in ../shared/data (a
 //! compact subset made dynamic, smooth synthetic time features, calibrated random decoders).
 
 use std::io::Cursor;
@@ -12,9 +12,9 @@ use dlgs::chunks::tfea::{self, Tiling};
 use dlgs::container::header::DeformModel;
 use dlgs::Limits;
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, write_model, SynthModel, SynthSpec};
 use dlgs_encoder::{EncoderConfig, FeatureCodec, HevcSettings};
 use dlgs_render::{metrics, orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
+use dlgs_testkit::synth::{synth_dynamic, write_model, SynthModel, SynthSpec};
 use dlgs_tests::load;
 use dlgs_tests::reference_deform::deform_reference;
 

@@ -11,7 +11,7 @@ use dlgs::container::ResidualMode;
 use dlgs::interop::spz_write::{write_spz, SpzVersion};
 use dlgs::Gaussians;
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
+use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_tests::load;
 
 const TOOL: &str = "@playcanvas/splat-transform@2.7.1";

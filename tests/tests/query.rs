@@ -2,7 +2,7 @@
 //! (`supersplat_fruit_drops_minimal`, 4,721 Gaussians, labels 0..8). The language itself is
 //! SYNTHETIC (no CLIP model or trained language field exists here): each category gets a
 //! 3-dim code and a constructed 3 -> ... -> 512 decoder maps codes to orthonormal vectors
-//! (`dlgs_query::labels`). The dynamic test moves Gaussians with the synthetic motion
+//! (`dlgs_testkit::labels`). The dynamic test moves Gaussians with the synthetic motion
 //! generator (`dlgs synth`), also not a trained model.
 //!
 //! `cargo test --release -p dlgs-tests --test query -- --nocapture` prints the IoU tables.
@@ -13,12 +13,12 @@ use dlgs::container::SceneHeader;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::{Gaussians, Limits};
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_encoder::{encode_still, EncoderConfig, FeatureCodec};
-use dlgs_query::labels::{label_map, one_hot, read_point_annotations, LabelCodebook};
 use dlgs_query::{batch_decode, query_levels, select_gaussians, MaskParams, Precision};
 use dlgs_query::{Embeddings, RelevanceField};
 use dlgs_render::{orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
+use dlgs_testkit::labels::{label_map, one_hot, read_point_annotations, LabelCodebook};
+use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_tests::{data, load};
 
 const SCENE: &str = "ply/supersplat_fruit_drops_minimal_4721_sh3.ply";

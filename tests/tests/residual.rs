@@ -2,7 +2,7 @@
 //! sequential and parallel residual modes, and seeking.
 //!
 //! NOTE: no real trained DLGStream model exists in this repository's data. The multi-GOP models
-//! here are built by `dlgs_encoder::synth` from a REAL canonical scene in ../shared/data: GOP 0
+//! here are built by `dlgs_testkit::synth` from a REAL canonical scene in ../shared/data: GOP 0
 //! is the real scene with a synthetic dynamic subset, and every later GOP carries a GENERATED
 //! binary voxel residual field (reference shapes, random bits with falling +1 frequency per
 //! level, a random MLP rescaled to plausible offsets).
@@ -17,8 +17,8 @@ use dlgs::model::ntc::{NtcConfig, NtcField};
 use dlgs::model::residual::{AttrGroup, DeltaResidual, DeltaTarget};
 use dlgs::{Canonical, Limits};
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::synth::{synth_dynamic, synth_ntc, write_model, SynthModel, SynthSpec};
 use dlgs_encoder::{EncoderConfig, FeatureCodec, GopCanonical, ResidualConfig, StreamEncoder};
+use dlgs_testkit::synth::{synth_dynamic, synth_ntc, write_model, SynthModel, SynthSpec};
 use dlgs_tests::{decode_all_stream, load};
 
 const SCENE: &str = "ply/gs3d-fork_lod3_tile_0_1971_sh3.ply";

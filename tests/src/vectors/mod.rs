@@ -390,7 +390,7 @@ fn dynamic_intra_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
 }
 
 fn dynamic_model_vector(scene: &dlgs::Gaussians, features: dlgs_encoder::FeatureCodec) -> Vec<u8> {
-    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
+    use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
     // The first 512 Gaussians keep the file small; 128 of them move.
     let part = first_512(scene);
     let spec = SynthSpec {
@@ -412,8 +412,8 @@ fn residual_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
     use dlgs::container::header::ResidualMode;
     use dlgs::model::ntc::NtcConfig;
     use dlgs::model::residual::{AttrGroup, DeltaTarget};
-    use dlgs_encoder::synth::{synth_dynamic, synth_ntc, SynthSpec};
     use dlgs_encoder::{GopCanonical, ResidualConfig, StreamEncoder};
+    use dlgs_testkit::synth::{synth_dynamic, synth_ntc, SynthSpec};
     let part = first_512(scene);
     let spec = SynthSpec {
         dynamic_fraction: 0.25,

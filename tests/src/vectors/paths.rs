@@ -121,8 +121,8 @@ fn small_dynamic(
     features: dlgs_encoder::FeatureCodec,
     deform_model: DeformModel,
     per_gop_range: bool,
-) -> (dlgs_encoder::synth::SynthModel, Vec<u8>) {
-    use dlgs_encoder::synth::{synth_dynamic, write_model, SynthSpec};
+) -> (dlgs_testkit::synth::SynthModel, Vec<u8>) {
+    use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
     let spec = SynthSpec {
         dynamic_fraction: 0.25,
         gops: 2,
@@ -197,10 +197,10 @@ fn tfea_reference(scene: &Gaussians) -> Vec<u8> {
 fn residual_scene(
     scene: &Gaussians,
     residual: dlgs_encoder::ResidualConfig,
-    second: impl Fn(&mut dlgs_encoder::StreamEncoder<Vec<u8>>, &dlgs_encoder::synth::SynthModel),
+    second: impl Fn(&mut dlgs_encoder::StreamEncoder<Vec<u8>>, &dlgs_testkit::synth::SynthModel),
 ) -> Vec<u8> {
-    use dlgs_encoder::synth::{synth_dynamic, SynthSpec};
     use dlgs_encoder::{GopCanonical, StreamEncoder};
+    use dlgs_testkit::synth::{synth_dynamic, SynthSpec};
     let spec = SynthSpec {
         dynamic_fraction: 0.125,
         gops: 2,
@@ -269,7 +269,7 @@ fn rntc_grid_scope(scene: &Gaussians) -> Vec<u8> {
             .map(|seed| {
                 let mut rng = fastrand::Rng::with_seed(seed);
                 let mut f =
-                    dlgs_encoder::synth::synth_ntc(&m.canonical, &mut rng, 1.0, small.clone());
+                    dlgs_testkit::synth::synth_ntc(&m.canonical, &mut rng, 1.0, small.clone());
                 // Every plane level as dense as the others (the generator's thin out by level,
                 // where each segment's own frequency wins by far): the scopes then differ by
                 // the range coder's last words only.

@@ -19,8 +19,8 @@ use dlgs::model::lang_decoder::{DenseLayer, LangDecoder, NamedEmbedding, REFEREN
 use dlgs::Gaussians;
 
 use crate::code_layout;
-use crate::embeddings::Embeddings;
-use crate::error::{QueryError, Result};
+use dlgs_query::embeddings::Embeddings;
+use dlgs_query::error::{QueryError, Result};
 
 /// Categories a codebook holds (labels 0..=9).
 pub const MAX_CATEGORIES: usize = 10;

@@ -486,15 +486,15 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
 /// Write a generated model with the given encoder settings.
 pub fn write_model<W: std::io::Write>(
     model: &SynthModel,
-    cfg: crate::EncoderConfig,
+    cfg: dlgs_encoder::EncoderConfig,
     out: W,
 ) -> Result<W> {
-    let mut enc = crate::StreamEncoder::new(out, model.scene.clone(), cfg)?;
+    let mut enc = dlgs_encoder::StreamEncoder::new(out, model.scene.clone(), cfg)?;
     let dynamic = model.scene.n_dynamic > 0;
     for (d, r) in model.gops.iter().zip(&model.residuals) {
         let canonical = match r {
-            Some(f) => crate::GopCanonical::Ntc(f),
-            None => crate::GopCanonical::State(&model.canonical),
+            Some(f) => dlgs_encoder::GopCanonical::Ntc(f),
+            None => dlgs_encoder::GopCanonical::State(&model.canonical),
         };
         enc.push(canonical, dynamic.then_some(d))?;
     }
