@@ -47,6 +47,21 @@ impl Limits {
         Ok(())
     }
 
+    /// `LimitExceeded` at `at` if `count` Gaussians would pass `max_gaussians`.
+    pub fn check_gaussians(&self, what: &'static str, count: u64, at: u64) -> crate::Result<()> {
+        if count > self.max_gaussians {
+            return Err(crate::Error::new(
+                crate::ErrorKind::LimitExceeded {
+                    what,
+                    value: count,
+                    limit: self.max_gaussians,
+                },
+                at,
+            ));
+        }
+        Ok(())
+    }
+
     /// Small limits for fuzzing and untrusted input in tests.
     pub fn tiny() -> Self {
         Limits {

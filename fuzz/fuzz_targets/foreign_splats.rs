@@ -3,8 +3,8 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = dlgs::interop::ply::read_ply(data);
-    let _ = dlgs::interop::splat::read_splat(data);
+    let _ = dlgs::interop::ply::read_ply(data, &dlgs::Limits::tiny());
+    let _ = dlgs::interop::splat::read_splat(data, &dlgs::Limits::tiny());
     let _ = dlgs::interop::spz::read_spz(data, &dlgs::Limits::tiny());
     let _ = dlgs::interop::sog::read_sog(data, &dlgs::Limits::tiny());
 });

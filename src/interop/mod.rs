@@ -15,26 +15,34 @@ use crate::limits::Limits;
 use crate::model::Gaussians;
 
 /// Read a PLY, `.splat`, SPZ or PlayCanvas SOG file (a `.sog` zip, or the `meta.json` of an
-/// unbundled SOG), chosen by extension (then by content).
+/// unbundled SOG), chosen by extension (then by content), within the default [`Limits`].
 pub fn read_splat_file(path: &std::path::Path) -> Result<Gaussians> {
+    read_splat_file_with_limits(path, &Limits::default())
+}
+
+/// [`read_splat_file`] within `limits`: the file itself must fit `max_alloc`, and each reader
+/// checks its counts and buffers against the same limits.
+pub fn read_splat_file_with_limits(path: &std::path::Path, limits: &Limits) -> Result<Gaussians> {
     if path.file_name().and_then(|n| n.to_str()) == Some("meta.json") {
-        return sog::read_sog_dir(path, &Limits::default());
+        return sog::read_sog_dir(path, limits);
     }
-    let data = std::fs::read(path)
-        .map_err(|e| Error::new(ErrorKind::Io(format!("{}: {e}", path.display())), 0))?;
+    let io = |e: std::io::Error| Error::new(ErrorKind::Io(format!("{}: {e}", path.display())), 0);
+    let size = std::fs::metadata(path).map_err(io)?.len();
+    limits.check_alloc("splat file size", size, 0)?;
+    let data = std::fs::read(path).map_err(io)?;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
     match ext.as_str() {
-        "ply" => ply::read_ply(&data),
-        "splat" => splat::read_splat(&data),
-        "spz" => spz::read_spz(&data, &Limits::default()),
-        _ if data.starts_with(b"ply") => ply::read_ply(&data),
-        _ if data.starts_with(&[0x1f, 0x8b]) => spz::read_spz(&data, &Limits::default()),
-        "sog" => sog::read_sog(&data, &Limits::default()),
-        _ if data.starts_with(b"PK\x03\x04") => sog::read_sog(&data, &Limits::default()),
+        "ply" => ply::read_ply(&data, limits),
+        "splat" => splat::read_splat(&data, limits),
+        "spz" => spz::read_spz(&data, limits),
+        _ if data.starts_with(b"ply") => ply::read_ply(&data, limits),
+        _ if data.starts_with(&[0x1f, 0x8b]) => spz::read_spz(&data, limits),
+        "sog" => sog::read_sog(&data, limits),
+        _ if data.starts_with(b"PK\x03\x04") => sog::read_sog(&data, limits),
         _ => Err(Error::new(
             ErrorKind::Foreign {
                 format: "splat",

@@ -6,6 +6,7 @@
 //! skipped). Degree is derived from the number of `f_rest_*` (0, 9, 24 or 45).
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::limits::Limits;
 use crate::model::{sh_coeffs, Gaussians};
 
 const FORMAT: &str = "PLY";
@@ -312,7 +313,9 @@ fn read_rows(
 }
 
 /// Read an INRIA-style PLY from memory.
-pub fn read_ply(data: &[u8]) -> Result<Gaussians> {
+/// Read an INRIA-layout PLY (ASCII or binary); at most `limits.max_gaussians` vertices, and
+/// the vertex rows' buffer within `limits.max_alloc`.
+pub fn read_ply(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     let h = parse_header(data)?;
     let mut at = h.body_start;
     for e in &h.elements {
@@ -328,6 +331,12 @@ pub fn read_ply(data: &[u8]) -> Result<Gaussians> {
         }
         let c = columns(&e.props)?;
         let ncol = e.props.len();
+        limits.check_gaussians("PLY vertex count", e.count as u64, 0)?;
+        limits.check_alloc(
+            "PLY vertex rows",
+            (e.count as u64).saturating_mul(ncol as u64 * 8),
+            0,
+        )?;
         // Binary: checked in read_rows before allocation. ASCII needs >= 2 bytes per value.
         if h.enc == Encoding::Ascii
             && e.count.saturating_mul(ncol).saturating_mul(2) > data.len() - at

@@ -3,6 +3,7 @@
 #![allow(clippy::disallowed_methods)] // a foreign format: see the module doc of `interop`
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::limits::Limits;
 use crate::model::Gaussians;
 
 pub const SH_C0: f32 = 0.282_094_8;
@@ -31,11 +32,13 @@ pub fn alpha_u8_to_logit(a: u8) -> f32 {
     (p / (1.0 - p)).ln()
 }
 
-pub fn read_splat(data: &[u8]) -> Result<Gaussians> {
+/// Read an antimatter15 `.splat` (32 bytes per Gaussian); at most `limits.max_gaussians`.
+pub fn read_splat(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     if !data.len().is_multiple_of(STRIDE) {
         return Err(err(format!("{} bytes is not a multiple of 32", data.len())));
     }
     let n = data.len() / STRIDE;
+    limits.check_gaussians(".splat Gaussians", n as u64, 0)?;
     let mut g = Gaussians::new(0, 0);
     g.positions.reserve(n);
     let f =

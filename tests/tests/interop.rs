@@ -20,6 +20,7 @@ fn the_same_three_gaussians_in_ply_splat_and_spz_agree() {
     let p = load("tiny/metalsplatter_3-points-from-train.ply");
     let s = splat::read_splat(
         &std::fs::read(data("tiny/metalsplatter_3-points-from-train.splat")).unwrap(),
+        &Limits::default(),
     )
     .unwrap();
     let z = spz::read_spz(
@@ -84,9 +85,15 @@ fn ply_write_read_round_trip_is_exact_with_and_without_language() {
         "ply/v3dg_donut_mipsplatting_45624_sh0.ply",
     ] {
         let g = load(rel);
-        assert_eq!(ply::read_ply(&ply::write_ply(&g).unwrap()).unwrap(), g);
+        assert_eq!(
+            ply::read_ply(&ply::write_ply(&g).unwrap(), &Limits::default()).unwrap(),
+            g
+        );
         let l = dlgs_tests::with_synthetic_language(&g);
-        assert_eq!(ply::read_ply(&ply::write_ply(&l).unwrap()).unwrap(), l);
+        assert_eq!(
+            ply::read_ply(&ply::write_ply(&l).unwrap(), &Limits::default()).unwrap(),
+            l
+        );
     }
 }
 
@@ -94,15 +101,56 @@ fn ply_write_read_round_trip_is_exact_with_and_without_language() {
 fn malformed_foreign_files_give_errors_not_panics() {
     let good = std::fs::read(data("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply")).unwrap();
     for cut in [0, 3, 10, 200, 1000, good.len() / 2, good.len() - 1] {
-        assert!(ply::read_ply(&good[..cut]).is_err(), "PLY cut at {cut}");
+        assert!(
+            ply::read_ply(&good[..cut], &Limits::default()).is_err(),
+            "PLY cut at {cut}"
+        );
     }
     let mut huge = String::from_utf8_lossy(
         &good[..good.windows(10).position(|w| w == b"end_header").unwrap()],
     )
     .replace("element vertex 1971", "element vertex 4000000000");
     huge.push_str("end_header\n");
-    assert!(ply::read_ply(huge.as_bytes()).is_err());
-    assert!(splat::read_splat(&[0u8; 33]).is_err());
+    assert!(ply::read_ply(huge.as_bytes(), &Limits::default()).is_err());
+    assert!(splat::read_splat(&[0u8; 33], &Limits::default()).is_err());
+    // Foreign readers draw on the same limits as the container: a real scene over a small
+    // budget is refused with the limit named, not read.
+    let small = Limits {
+        max_gaussians: 1000,
+        ..Limits::default()
+    };
+    for e in [
+        ply::read_ply(&good, &small).unwrap_err(),
+        splat::read_splat(
+            &std::fs::read(data("splat/marcelpadilla_plant.splat")).unwrap(),
+            &small,
+        )
+        .unwrap_err(),
+    ] {
+        assert!(
+            matches!(e.kind, dlgs::ErrorKind::LimitExceeded { limit: 1000, .. }),
+            "{e}"
+        );
+    }
+    let tight = Limits {
+        max_alloc: 1 << 16,
+        ..Limits::default()
+    };
+    let e = dlgs::interop::read_splat_file_with_limits(
+        &data("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply"),
+        &tight,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(
+            e.kind,
+            dlgs::ErrorKind::LimitExceeded {
+                what: "splat file size",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let spz_good = std::fs::read(data("tiny/metalsplatter_3-points-from-train.spz")).unwrap();
     for cut in 0..spz_good.len() {
         assert!(
