@@ -6,6 +6,7 @@ pub mod chunk_type;
 pub mod gop;
 pub mod header;
 pub mod reader;
+mod rules;
 pub mod stream;
 pub mod writer;
 

@@ -10,7 +10,7 @@ use crate::container::chunk::{
 };
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry, TAIL_LEN};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
-use crate::container::is_known_chunk;
+use crate::container::rules::{self, Section, SectionRules};
 use crate::error::{io_err, Error, ErrorKind, Result};
 use crate::limits::Limits;
 
@@ -71,12 +71,7 @@ impl<R: Read + Seek> FileReader<R> {
         };
         // HEAD
         let head = this.header_at(SIGNATURE_LEN, file_len)?;
-        if head.ty != ChunkType::HEAD || head.gop != SCENE_LEVEL {
-            return Err(Error::new(
-                ErrorKind::Order("the first chunk must be a scene-level HEAD"),
-                head.offset,
-            ));
-        }
+        rules::check_head(&head)?;
         let p = this.payload(&head)?;
         this.scene = SceneHeader::decode(&p, head.payload_offset(), &this.limits)?;
 
@@ -128,33 +123,13 @@ impl<R: Read + Seek> FileReader<R> {
 
         // Scene-level chunks up to the first GOPH.
         let mut at = head.end();
+        let mut scene_rules = SectionRules::new(Section::Scene);
         loop {
             let c = this.header_at(at, gidx.offset)?;
             if c.ty == ChunkType::GOPH {
                 break;
             }
-            if c.gop != SCENE_LEVEL
-                || matches!(c.ty, ChunkType::HEAD | ChunkType::GIDX | ChunkType::TAIL)
-            {
-                return Err(Error::new(
-                    ErrorKind::Order("only scene-level chunks may precede the first GOPH"),
-                    c.offset,
-                ));
-            }
-            if c.must_understand() && !is_known_chunk(c.ty) {
-                return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
-            }
-            if this.scene_chunks.len() as u32 >= this.limits.max_scene_chunks {
-                return Err(Error::new(
-                    ErrorKind::LimitExceeded {
-                        what: "scene-level chunks",
-                        value: this.scene_chunks.len() as u64 + 1,
-                        limit: this.limits.max_scene_chunks as u64,
-                    },
-                    c.offset,
-                ));
-            }
-            if is_known_chunk(c.ty) {
+            if scene_rules.admit(&c, &this.limits)? {
                 this.scene_chunks.push(c);
             }
             at = c.end();
@@ -208,16 +183,7 @@ impl<R: Read + Seek> FileReader<R> {
             "chunk header",
         )?;
         let info = decode_header(h.as_slice().try_into().expect("24 bytes"), offset)?;
-        if info.len > self.limits.max_chunk_len {
-            return Err(Error::new(
-                ErrorKind::LimitExceeded {
-                    what: "chunk length",
-                    value: info.len,
-                    limit: self.limits.max_chunk_len,
-                },
-                offset + 12,
-            ));
-        }
+        rules::check_len(&info, &self.limits)?;
         let avail = region_end - offset - CHUNK_HEADER_LEN;
         if info.len.checked_add(4).is_none_or(|n| n > avail) {
             return Err(Error::new(
@@ -275,35 +241,10 @@ impl<R: Read + Seek> FileReader<R> {
         gh.validate(&self.scene, g, goph.payload_offset())?;
         let mut out = Vec::new();
         let mut at = goph.end();
-        let mut count = 0u32;
+        let mut rules = SectionRules::new(Section::Gop(g));
         while at < end {
             let c = self.header_at(at, end)?;
-            if c.gop != g
-                || matches!(
-                    c.ty,
-                    ChunkType::HEAD | ChunkType::GOPH | ChunkType::GIDX | ChunkType::TAIL
-                )
-            {
-                return Err(Error::new(
-                    ErrorKind::Order("a GOP may hold only payload chunks of its own GOP number"),
-                    c.offset,
-                ));
-            }
-            if c.must_understand() && !is_known_chunk(c.ty) {
-                return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
-            }
-            count += 1;
-            if count > self.limits.max_chunks_per_gop {
-                return Err(Error::new(
-                    ErrorKind::LimitExceeded {
-                        what: "chunks per GOP",
-                        value: count as u64,
-                        limit: self.limits.max_chunks_per_gop as u64,
-                    },
-                    c.offset,
-                ));
-            }
-            if is_known_chunk(c.ty) {
+            if rules.admit(&c, &self.limits)? {
                 out.push(c);
             }
             at = c.end();

@@ -10,7 +10,7 @@ use crate::container::chunk::{
 };
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
-use crate::container::is_known_chunk;
+use crate::container::rules::{self, Section, SectionRules};
 use crate::error::{io_err, Error, ErrorKind, Result};
 use crate::limits::Limits;
 
@@ -42,8 +42,8 @@ pub struct StreamReader<R: Read> {
     scene: SceneHeader,
     state: State,
     seen: Vec<IndexEntry>,
-    scene_chunks: u32,
-    gop_chunks: u32,
+    /// The rules of the section being read (scene chunks, then each GOP's).
+    section: SectionRules,
     gidx_offset: u64,
 }
 
@@ -60,19 +60,13 @@ impl<R: Read> StreamReader<R> {
             scene: SceneHeader::still(0, 0),
             state: State::Scene,
             seen: Vec::new(),
-            scene_chunks: 0,
-            gop_chunks: 0,
+            section: SectionRules::new(Section::Scene),
             gidx_offset: 0,
         };
         let sig = s.read_exact_vec(SIGNATURE_LEN as usize, "signature")?;
         decode_signature(&sig)?;
         let (head, p) = s.read_chunk()?;
-        if head.ty != ChunkType::HEAD || head.gop != SCENE_LEVEL {
-            return Err(Error::new(
-                ErrorKind::Order("the first chunk must be a scene-level HEAD"),
-                head.offset,
-            ));
-        }
+        rules::check_head(&head)?;
         s.scene = SceneHeader::decode(&p, head.payload_offset(), &s.limits)?;
         Ok(s)
     }
@@ -112,16 +106,7 @@ impl<R: Read> StreamReader<R> {
         let at = self.pos;
         let h = self.read_exact_vec(CHUNK_HEADER_LEN as usize, "chunk header")?;
         let info = decode_header(h.as_slice().try_into().expect("24 bytes"), at)?;
-        if info.len > self.limits.max_chunk_len {
-            return Err(Error::new(
-                ErrorKind::LimitExceeded {
-                    what: "chunk length",
-                    value: info.len,
-                    limit: self.limits.max_chunk_len,
-                },
-                at + 12,
-            ));
-        }
+        rules::check_len(&info, &self.limits)?;
         Ok(info)
     }
 
@@ -204,7 +189,7 @@ impl<R: Read> StreamReader<R> {
                         length: 0,
                     });
                     self.state = State::InGop(c.gop);
-                    self.gop_chunks = 0;
+                    self.section = SectionRules::new(Section::Gop(c.gop));
                     return Ok(Some(StreamEvent::GopStart(c.gop, gh)));
                 }
                 ChunkType::GIDX => {
@@ -234,54 +219,11 @@ impl<R: Read> StreamReader<R> {
                     self.state = State::AfterIndex;
                     return Ok(Some(StreamEvent::End(idx)));
                 }
-                ChunkType::HEAD | ChunkType::TAIL => {
-                    return Err(Error::new(
-                        ErrorKind::Order("HEAD/TAIL in the body"),
-                        c.offset,
-                    ));
-                }
                 _ => {}
             }
-            let expected_gop = current.unwrap_or(SCENE_LEVEL);
-            if c.gop != expected_gop {
-                return Err(Error::new(
-                    ErrorKind::Order("chunk GOP number does not match its position"),
-                    c.offset + 8,
-                ));
-            }
-            if c.must_understand() && !is_known_chunk(c.ty) {
-                return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
-            }
-            let (count, limit, what) = match current {
-                None => {
-                    self.scene_chunks += 1;
-                    (
-                        self.scene_chunks,
-                        self.limits.max_scene_chunks,
-                        "scene-level chunks",
-                    )
-                }
-                Some(_) => {
-                    self.gop_chunks += 1;
-                    (
-                        self.gop_chunks,
-                        self.limits.max_chunks_per_gop,
-                        "chunks per GOP",
-                    )
-                }
-            };
-            if count > limit {
-                return Err(Error::new(
-                    ErrorKind::LimitExceeded {
-                        what,
-                        value: count as u64,
-                        limit: limit as u64,
-                    },
-                    c.offset,
-                ));
-            }
+            let known = self.section.admit(&c, &self.limits)?;
             let p = self.read_payload(&c)?;
-            if !is_known_chunk(c.ty) {
+            if !known {
                 continue; // unknown ancillary: skipped after its CRC was checked
             }
             return Ok(Some(match current {
