@@ -482,58 +482,70 @@ impl CodecArgs {
             );
         }
         Ok(EncoderConfig {
-            canonical: self.canonical()?,
-            raw_codec: if self.no_zstd {
-                RawCodec::None
-            } else {
-                RawCodec::Zstd
+            container: dlgs_encoder::ContainerSettings {
+                zstd_level: self.zstd_level,
+                meta: (!self.no_meta).then_some(meta),
             },
-            zstd_level: self.zstd_level,
-            meta: (!self.no_meta).then_some(meta),
-            features: if self.exact_features {
-                FeatureCodec::Exact
-            } else {
-                FeatureCodec::Hevc(HevcSettings {
-                    crf: self.crf,
-                    preset: self.preset.clone(),
-                    lossless: self.lossless_features,
-                    intra_only: self.intra_features,
-                })
+            coding: dlgs_encoder::CanonicalSettings {
+                codec: self.canonical()?,
+                raw_codec: if self.no_zstd {
+                    RawCodec::None
+                } else {
+                    RawCodec::Zstd
+                },
+                compact_records: true,
+                mixed_margin: self.mixed_margin()?,
+                octree_positions: !self.grid_positions,
+                rotation_coarsening: match self.coarse_rotations {
+                    None if self.grid_positions => None,
+                    None => Some(RotationCoarsening::DEFAULT),
+                    Some(f) if f > 0.0 => Some(RotationCoarsening {
+                        factor: f,
+                        ..RotationCoarsening::DEFAULT
+                    }),
+                    Some(_) => None,
+                },
             },
-            per_gop_range: self.per_gop_range,
-            mlp_weights: if self.mlp_f16 || self.quality() == "near-lossless" {
-                WeightType::F16
-            } else {
-                WeightType::F32
+            still: dlgs_encoder::StillTools {
+                canonical_orientation: !self.keep_orientation,
+                drop_invisible: !self.keep_invisible,
+                trim_zero_sh_bands: !self.keep_sh_degree,
+                reallocate_bits: self.reallocate_bits,
+                shape_tolerance: self.shape,
+                tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
+                importance: None,
             },
-            residual: self.residual()?,
-            lang_decoder: self.lang_decoder()?,
-            lang_decoder_weights: if self.lang_decoder_f32 {
-                WeightType::F32
-            } else {
-                WeightType::F16
+            refit: dlgs_encoder::RefitSettings {
+                colours: self.refit_colours,
+                opacities: self.refit_opacities,
+                full_size: self.refit_full_size,
             },
-            canonical_orientation: !self.keep_orientation,
-            drop_invisible: !self.keep_invisible,
-            trim_zero_sh_bands: !self.keep_sh_degree,
-            compact_records: true,
-            mixed_margin: self.mixed_margin()?,
-            reallocate_bits: self.reallocate_bits,
-            shape_tolerance: self.shape,
-            tier_weights: self.tiers.iter().copied().filter(|&f| f > 0.0).collect(),
-            importance: None,
-            octree_positions: !self.grid_positions,
-            refit_colours: self.refit_colours,
-            refit_opacities: self.refit_opacities,
-            refit_full_size: self.refit_full_size,
-            rotation_coarsening: match self.coarse_rotations {
-                None if self.grid_positions => None,
-                None => Some(RotationCoarsening::DEFAULT),
-                Some(f) if f > 0.0 => Some(RotationCoarsening {
-                    factor: f,
-                    ..RotationCoarsening::DEFAULT
-                }),
-                Some(_) => None,
+            dynamic: dlgs_encoder::DynamicSettings {
+                features: if self.exact_features {
+                    FeatureCodec::Exact
+                } else {
+                    FeatureCodec::Hevc(HevcSettings {
+                        crf: self.crf,
+                        preset: self.preset.clone(),
+                        lossless: self.lossless_features,
+                        intra_only: self.intra_features,
+                    })
+                },
+                per_gop_range: self.per_gop_range,
+                mlp_weights: if self.mlp_f16 || self.quality() == "near-lossless" {
+                    WeightType::F16
+                } else {
+                    WeightType::F32
+                },
+                residual: self.residual()?,
+            },
+            language: dlgs_encoder::LanguageSettings {
+                decoder: self.lang_decoder()?,
+                weights: if self.lang_decoder_f32 {
+                    WeightType::F32
+                } else {
+                    WeightType::F16
+                },
             },
         })
     }

@@ -103,7 +103,10 @@ fn encode_to_target(
             );
         }
         let lossless = EncoderConfig {
-            canonical: CanonicalCodec::Raw,
+            coding: dlgs_encoder::CanonicalSettings {
+                codec: CanonicalCodec::Raw,
+                ..cfg.coding
+            },
             ..cfg
         };
         dlgs_encoder::encode_still(g, lossless, out)?;
@@ -186,7 +189,10 @@ fn encode_to_target(
                 println!("  no candidate reaches {target:.2} dB: storing the scene lossless");
             }
             let lossless = EncoderConfig {
-                canonical: CanonicalCodec::Raw,
+                coding: dlgs_encoder::CanonicalSettings {
+                    codec: CanonicalCodec::Raw,
+                    ..cfg.coding
+                },
                 ..cfg
             };
             dlgs_encoder::encode_still(g, lossless, out)?;
@@ -304,8 +310,8 @@ pub fn encode_file(
         v => bail!("--ntc {v}: expected keep, recode or auto"),
     };
     let mut cfg = codec.config(meta(input, settings))?;
-    if cfg.lang_decoder.is_none() {
-        cfg.lang_decoder = dec
+    if cfg.language.decoder.is_none() {
+        cfg.language.decoder = dec
             .lang_decoder()
             .with_context(|| format!("reading the language decoder of {}", input.display()))?;
     }

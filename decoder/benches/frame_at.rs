@@ -23,7 +23,10 @@ fn bench(c: &mut Criterion) {
     };
     let model = synth_dynamic(&plant(), &spec).unwrap();
     let cfg = EncoderConfig {
-        features: FeatureCodec::Exact,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: FeatureCodec::Exact,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let bytes = write_model(&model, cfg, Vec::new()).unwrap();

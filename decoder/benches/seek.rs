@@ -31,10 +31,13 @@ fn bench(c: &mut Criterion) {
     };
     for (label, intra_only) in [("one-stream", false), ("intra-only", true)] {
         let cfg = EncoderConfig {
-            features: FeatureCodec::Hevc(HevcSettings {
-                intra_only,
+            dynamic: dlgs_encoder::DynamicSettings {
+                features: FeatureCodec::Hevc(HevcSettings {
+                    intra_only,
+                    ..Default::default()
+                }),
                 ..Default::default()
-            }),
+            },
             ..Default::default()
         };
         let bytes = write_model(&model, cfg, Vec::new()).unwrap();

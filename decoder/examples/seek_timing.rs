@@ -33,13 +33,16 @@ fn main() {
         let t0 = Instant::now();
         let m = synth_dynamic(&scene, &spec).unwrap();
         let cfg = EncoderConfig {
-            features: if hevc {
-                FeatureCodec::Hevc(HevcSettings {
-                    intra_only: intra,
-                    ..Default::default()
-                })
-            } else {
-                FeatureCodec::Exact
+            dynamic: dlgs_encoder::DynamicSettings {
+                features: if hevc {
+                    FeatureCodec::Hevc(HevcSettings {
+                        intra_only: intra,
+                        ..Default::default()
+                    })
+                } else {
+                    FeatureCodec::Exact
+                },
+                ..Default::default()
             },
             ..Default::default()
         };

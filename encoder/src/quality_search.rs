@@ -225,34 +225,44 @@ pub fn smallest_at_view_size(
     view_size: (u32, u32),
     progress: impl FnMut(&Trial),
 ) -> Result<Found> {
-    let sort = match base.canonical {
+    let sort = match base.coding.codec {
         CanonicalCodec::Sorted { sort, .. } => sort,
         CanonicalCodec::Raw => crate::SortSpec::DEFAULT,
     };
-    let refit = base.refit_colours;
+    let refit = base.refit.colours;
     // Every candidate is `base` with its own bits and tiers, without the other searches.
     let base = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::HIGH,
-            sort,
+        coding: crate::config::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::HIGH,
+                sort,
+            },
+            ..base.clone().coding
         },
-        shape_tolerance: 0.0,
-        reallocate_bits: 0,
-        refit_colours: false,
+        still: crate::config::StillTools {
+            shape_tolerance: 0.0,
+            reallocate_bits: 0,
+            ..base.clone().still
+        },
+        refit: crate::config::RefitSettings {
+            colours: false,
+            ..base.clone().refit
+        },
         ..base.clone()
     };
     // The tiers' blending weights, measured once on the set the encoder codes.
     let (prepared, _) = prepare_still(g, &base);
     let coded = prepared.as_ref().unwrap_or(g);
     let oriented = base
+        .still
         .canonical_orientation
         .then(|| orientation::closest_to_identity(coded));
     let blend: Arc<[f64]> = importance::blend_weights(oriented.as_ref().unwrap_or(coded)).into();
     let cams = search_views_sized(g, view_size);
-    let start_factor = base.rotation_coarsening.map_or(0.0, |c| c.factor);
+    let start_factor = base.coding.rotation_coarsening.map_or(0.0, |c| c.factor);
     // The factors moved through: none but `base`'s without octree positions.
     let mut factors = vec![start_factor];
-    if base.octree_positions {
+    if base.coding.octree_positions {
         factors.extend(ROTATION_FACTORS);
         factors.sort_by(f32::total_cmp);
         factors.dedup();
@@ -357,18 +367,27 @@ impl<P: FnMut(&Trial)> Search<'_, P> {
             return Ok(i);
         }
         let cfg = EncoderConfig {
-            canonical: CanonicalCodec::Sorted {
-                bits,
-                sort: self.sort,
+            coding: crate::config::CanonicalSettings {
+                codec: CanonicalCodec::Sorted {
+                    bits,
+                    sort: self.sort,
+                },
+                rotation_coarsening: (rotations > 0.0).then_some(RotationCoarsening {
+                    factor: rotations,
+                    ..RotationCoarsening::DEFAULT
+                }),
+                ..self.base.clone().coding
             },
-            tier_weights: tiers.to_vec(),
-            shape_tolerance: shape,
-            importance: Some(self.blend.clone()),
-            rotation_coarsening: (rotations > 0.0).then_some(RotationCoarsening {
-                factor: rotations,
-                ..RotationCoarsening::DEFAULT
-            }),
-            refit_colours: refit,
+            still: crate::config::StillTools {
+                tier_weights: tiers.to_vec(),
+                shape_tolerance: shape,
+                importance: Some(self.blend.clone()),
+                ..self.base.clone().still
+            },
+            refit: crate::config::RefitSettings {
+                colours: refit,
+                ..self.base.clone().refit
+            },
             ..self.base.clone()
         };
         let file = crate::encode_still(self.g, cfg, Vec::new())?;
@@ -689,7 +708,10 @@ mod tests {
     fn with_the_refit_the_closest_candidates_below_are_coded_again_at_the_end() {
         let plain = plain_search();
         let cfg = EncoderConfig {
-            refit_colours: true,
+            refit: crate::config::RefitSettings {
+                colours: true,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let found = search(&scene(), 40.0, &cfg);
@@ -784,8 +806,11 @@ mod tests {
         assert_eq!(found.trials[*i].bytes, file.len());
         // Grid positions have no coarse rotations to move.
         let grid = EncoderConfig {
-            octree_positions: false,
-            rotation_coarsening: None,
+            coding: crate::config::CanonicalSettings {
+                octree_positions: false,
+                rotation_coarsening: None,
+                ..Default::default()
+            },
             ..EncoderConfig::default()
         };
         let found = search(&scene(), 40.0, &grid);

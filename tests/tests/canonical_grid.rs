@@ -195,11 +195,14 @@ fn statics_are_sorted_dynamics_keep_their_order() {
     }
     // Grid positions: the static set is stored in the grid sort's order (layout 0).
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::HIGH,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::HIGH,
+                sort: SortSpec::DEFAULT,
+            },
+            octree_positions: false,
+            ..Default::default()
         },
-        octree_positions: false,
         ..Default::default()
     };
     // A dynamic scene needs a deformation field; check the payload directly instead.
@@ -489,11 +492,17 @@ fn without_mixing_no_channel_takes_modes_5_or_6_and_every_cell_decodes_the_same(
 /// static set.
 fn encode_still(g: &Gaussians, orient: bool) -> (usize, Gaussians) {
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::MEDIUM,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::MEDIUM,
+                sort: SortSpec::DEFAULT,
+            },
+            ..Default::default()
         },
-        canonical_orientation: orient,
+        still: dlgs_encoder::StillTools {
+            canonical_orientation: orient,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let mut enc = StreamEncoder::new(
@@ -597,11 +606,17 @@ fn bit_reallocation_buys_quality_within_the_presets_bytes() {
     // -> 57.84 dB on its views; 24 s instead of 67 s for the whole plant).
     let g = every_nth(&load("splat/marcelpadilla_plant.splat"), 4);
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::MEDIUM,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::MEDIUM,
+                sort: SortSpec::DEFAULT,
+            },
+            ..Default::default()
         },
-        reallocate_bits: 4,
+        still: dlgs_encoder::StillTools {
+            reallocate_bits: 4,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let (bytes, report) = dlgs_encoder::encode_still_reporting(&g, cfg, Vec::new()).unwrap();
@@ -667,9 +682,12 @@ fn still_file(
     cfg: EncoderConfig,
 ) -> (usize, dlgs_encoder::StillReport, Gaussians) {
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits,
+                sort: SortSpec::DEFAULT,
+            },
+            ..cfg.coding
         },
         ..cfg
     };
@@ -689,7 +707,10 @@ fn never_drawn_gaussians_are_left_out_without_changing_a_pixel() {
     assert_same_pixels(&g, &kept);
     let encode = |drop_invisible: bool| {
         let cfg = EncoderConfig {
-            drop_invisible,
+            still: dlgs_encoder::StillTools {
+                drop_invisible,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let (bytes, report, statics) = still_file(&g, QuantBits::MEDIUM, cfg);
@@ -714,7 +735,10 @@ fn sh_bands_that_are_zero_everywhere_are_left_out_without_changing_a_pixel() {
     assert_eq!(dlgs_encoder::zero_bands::degree_in_use(&g), 0);
     let encode = |trim: bool| {
         let cfg = EncoderConfig {
-            trim_zero_sh_bands: trim,
+            still: dlgs_encoder::StillTools {
+                trim_zero_sh_bands: trim,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let (bytes, _, statics) = still_file(&g, QuantBits::HIGH, cfg);
@@ -745,11 +769,17 @@ fn shaped_levels_stay_near_their_values_and_shrink_a_real_sh3_scene() {
     let g = load("ply/supersplat_fruit_drops_minimal_4721_sh3.ply");
     let encode = |tolerance: f64, threads: usize| {
         let cfg = EncoderConfig {
-            canonical: CanonicalCodec::Sorted {
-                bits: QuantBits::HIGH,
-                sort: SortSpec::DEFAULT,
+            coding: dlgs_encoder::CanonicalSettings {
+                codec: CanonicalCodec::Sorted {
+                    bits: QuantBits::HIGH,
+                    sort: SortSpec::DEFAULT,
+                },
+                ..Default::default()
             },
-            shape_tolerance: tolerance,
+            still: dlgs_encoder::StillTools {
+                shape_tolerance: tolerance,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let bytes = on_threads(threads, || {
@@ -837,12 +867,18 @@ fn shaping_handles_degenerate_and_tiny_sets() {
     let empty = Gaussians::new(g.sh_degree, 0);
     for (name, s) in [("tile", &g), ("one", &one), ("empty", &empty)] {
         let cfg = EncoderConfig {
-            canonical: CanonicalCodec::Sorted {
-                bits: QuantBits::MEDIUM,
-                sort: SortSpec::DEFAULT,
+            coding: dlgs_encoder::CanonicalSettings {
+                codec: CanonicalCodec::Sorted {
+                    bits: QuantBits::MEDIUM,
+                    sort: SortSpec::DEFAULT,
+                },
+                ..Default::default()
             },
-            shape_tolerance: 0.1,
-            drop_invisible: false,
+            still: dlgs_encoder::StillTools {
+                shape_tolerance: 0.1,
+                drop_invisible: false,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let bytes = dlgs_encoder::encode_still(s, cfg, Vec::new()).unwrap();
@@ -1004,11 +1040,17 @@ fn tiers_keep_the_image_and_shrink_a_real_scene() {
     let g = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
     let encode = |tiers: Vec<f64>| {
         let cfg = EncoderConfig {
-            canonical: CanonicalCodec::Sorted {
-                bits: QuantBits::HIGH,
-                sort: SortSpec::DEFAULT,
+            coding: dlgs_encoder::CanonicalSettings {
+                codec: CanonicalCodec::Sorted {
+                    bits: QuantBits::HIGH,
+                    sort: SortSpec::DEFAULT,
+                },
+                ..Default::default()
             },
-            tier_weights: tiers,
+            still: dlgs_encoder::StillTools {
+                tier_weights: tiers,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let bytes = dlgs_encoder::encode_still(&g, cfg, Vec::new()).unwrap();
@@ -1482,7 +1524,10 @@ type PlainAndRefit = (
 fn plain_and_refit(g: &Gaussians, cfg: EncoderConfig) -> PlainAndRefit {
     let code = |refit_colours: bool| {
         let cfg = EncoderConfig {
-            refit_colours,
+            refit: dlgs_encoder::RefitSettings {
+                colours: refit_colours,
+                ..cfg.clone().refit
+            },
             ..cfg.clone()
         };
         let (bytes, report) =
@@ -1501,11 +1546,17 @@ fn plain_and_refit(g: &Gaussians, cfg: EncoderConfig) -> PlainAndRefit {
 fn lod3_refit_case() -> (Gaussians, EncoderConfig) {
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::MEDIUM,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::MEDIUM,
+                sort: SortSpec::DEFAULT,
+            },
+            ..Default::default()
         },
-        tier_weights: vec![0.5, 0.2],
+        still: dlgs_encoder::StillTools {
+            tier_weights: vec![0.5, 0.2],
+            ..Default::default()
+        },
         ..Default::default()
     };
     (g, cfg)
@@ -1552,9 +1603,12 @@ fn the_colour_refit_handles_degenerate_gaussians() {
     // channel, and a set with a single Gaussian: the refit codes, judges and decodes finite,
     // with the opacity refit too (opacities at 0 and 1 stay on their end levels).
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::LOW,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::LOW,
+                sort: SortSpec::DEFAULT,
+            },
+            ..Default::default()
         },
         ..Default::default()
     };
@@ -1586,8 +1640,11 @@ fn opacity_refit(
     cfg: EncoderConfig,
 ) -> (Vec<u8>, Gaussians, dlgs_encoder::RefitReport) {
     let cfg = EncoderConfig {
-        refit_colours: true,
-        refit_opacities: true,
+        refit: dlgs_encoder::RefitSettings {
+            colours: true,
+            opacities: true,
+            ..cfg.refit
+        },
         ..cfg
     };
     let (bytes, report) =
@@ -1640,9 +1697,12 @@ fn a_colour_refit_that_renders_worse_on_unseen_views_is_not_stored() {
     // coding, byte for byte. The whole donut loses less (54.69 -> 54.60 dB) in 1.6x the time.
     let g = every_nth(&load("ply/v3dg_donut_mipsplatting_45624_sh0.ply"), 2);
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::HIGH,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::HIGH,
+                sort: SortSpec::DEFAULT,
+            },
+            ..Default::default()
         },
         ..Default::default()
     };

@@ -149,7 +149,10 @@ fn damage_to_a_dynamic_file_is_detected_or_harmless() {
         }),
     ] {
         let cfg = EncoderConfig {
-            features,
+            dynamic: dlgs_encoder::DynamicSettings {
+                features,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let bytes = write_model(&model, cfg, Vec::new()).unwrap();

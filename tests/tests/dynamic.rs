@@ -31,7 +31,10 @@ fn model(language: bool, gops: u32) -> SynthModel {
 
 fn encode(m: &SynthModel, features: FeatureCodec) -> Vec<u8> {
     let cfg = EncoderConfig {
-        features,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features,
+            ..Default::default()
+        },
         ..Default::default()
     };
     write_model(m, cfg, Vec::new()).unwrap()
@@ -384,8 +387,11 @@ fn f16_weights_cost_little() {
     let cam = camera(&m);
     let reference = exact(&m);
     let cfg = EncoderConfig {
-        features: FeatureCodec::Exact,
-        mlp_weights: WeightType::F16,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: FeatureCodec::Exact,
+            mlp_weights: WeightType::F16,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let half = write_model(&m, cfg, Vec::new()).unwrap();
@@ -412,7 +418,10 @@ fn encoder_rejects_non_finite_dynamic_input() {
     let err = write_model(
         &m,
         EncoderConfig {
-            features: FeatureCodec::Exact,
+            dynamic: dlgs_encoder::DynamicSettings {
+                features: FeatureCodec::Exact,
+                ..Default::default()
+            },
             ..Default::default()
         },
         Vec::new(),

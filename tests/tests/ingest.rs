@@ -506,13 +506,19 @@ fn a_run_with_only_checkpoints_reads_them_and_compressed_files_win_otherwise() {
 /// in f16, residual GOPs as lossy as GOP 0 (what `CodecArgs::config` builds for that preset).
 fn near_lossless() -> EncoderConfig {
     EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: QuantBits::NEAR_LOSSLESS,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: QuantBits::NEAR_LOSSLESS,
+                sort: SortSpec::DEFAULT,
+            },
+            ..Default::default()
         },
-        mlp_weights: WeightType::F16,
-        residual: ResidualConfig {
-            follow_quantisation: true,
+        dynamic: dlgs_encoder::DynamicSettings {
+            mlp_weights: WeightType::F16,
+            residual: ResidualConfig {
+                follow_quantisation: true,
+                ..Default::default()
+            },
             ..Default::default()
         },
         ..Default::default()

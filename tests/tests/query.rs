@@ -189,8 +189,10 @@ fn unfiltered() -> MaskParams {
 
 fn file_scene(g: &Gaussians, book: &LabelCodebook, weights: WeightType) -> Vec<u8> {
     let cfg = EncoderConfig {
-        lang_decoder: Some(book.decoder.clone()),
-        lang_decoder_weights: weights,
+        language: dlgs_encoder::LanguageSettings {
+            decoder: Some(book.decoder.clone()),
+            weights,
+        },
         ..EncoderConfig::default()
     };
     encode_still(g, cfg, Vec::new()).unwrap()
@@ -274,8 +276,14 @@ fn masks_follow_the_motion_of_a_dynamic_model() {
     };
     let model = synth_dynamic(&lg, &spec).unwrap();
     let cfg = EncoderConfig {
-        features: FeatureCodec::Exact,
-        lang_decoder: Some(book.decoder.clone()),
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: FeatureCodec::Exact,
+            ..Default::default()
+        },
+        language: dlgs_encoder::LanguageSettings {
+            decoder: Some(book.decoder.clone()),
+            ..Default::default()
+        },
         ..EncoderConfig::default()
     };
     let bytes = write_model(&model, cfg, Vec::new()).unwrap();
@@ -468,7 +476,10 @@ fn lang_decoder_chunk_round_trips_and_rejects_damage() {
     // A decoder for a scene without language is refused by the encoder.
     let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
     let cfg = EncoderConfig {
-        lang_decoder: Some(book.decoder.clone()),
+        language: dlgs_encoder::LanguageSettings {
+            decoder: Some(book.decoder.clone()),
+            ..Default::default()
+        },
         ..EncoderConfig::default()
     };
     assert!(encode_still(&g, cfg, Vec::new()).is_err());

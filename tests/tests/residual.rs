@@ -35,7 +35,10 @@ fn model(mode: ResidualMode, gops: u32) -> SynthModel {
 
 fn exact_cfg() -> EncoderConfig {
     EncoderConfig {
-        features: FeatureCodec::Exact,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: FeatureCodec::Exact,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }
@@ -387,7 +390,7 @@ fn explicit_residuals_are_exact_or_within_their_declared_bounds() {
     for exact in [true, false] {
         let mut cfg = exact_cfg();
         if !exact {
-            cfg.residual = ResidualConfig {
+            cfg.dynamic.residual = ResidualConfig {
                 groups: AttrGroup::ALL
                     .into_iter()
                     .map(|g| match bounds.iter().find(|b| b.0 == g) {

@@ -402,7 +402,10 @@ fn dynamic_model_vector(scene: &dlgs::Gaussians, features: dlgs_encoder::Feature
     };
     let m = synth_dynamic(&part, &spec).unwrap();
     let cfg = dlgs_encoder::EncoderConfig {
-        features,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features,
+            ..Default::default()
+        },
         ..Default::default()
     };
     write_model(&m, cfg, Vec::new()).unwrap()
@@ -442,17 +445,20 @@ fn residual_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
         *v -= 0.01;
     }
     let cfg = dlgs_encoder::EncoderConfig {
-        features: dlgs_encoder::FeatureCodec::Exact,
-        residual: ResidualConfig {
-            groups: AttrGroup::ALL
-                .into_iter()
-                .map(|g| match g {
-                    AttrGroup::Position => (g, DeltaTarget::Bound(1e-4)),
-                    AttrGroup::ShDc => (g, DeltaTarget::Bound(2e-3)),
-                    _ => (g, DeltaTarget::Exact),
-                })
-                .collect(),
-            follow_quantisation: false,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: dlgs_encoder::FeatureCodec::Exact,
+            residual: ResidualConfig {
+                groups: AttrGroup::ALL
+                    .into_iter()
+                    .map(|g| match g {
+                        AttrGroup::Position => (g, DeltaTarget::Bound(1e-4)),
+                        AttrGroup::ShDc => (g, DeltaTarget::Bound(2e-3)),
+                        _ => (g, DeltaTarget::Exact),
+                    })
+                    .collect(),
+                follow_quantisation: false,
+            },
+            ..Default::default()
         },
         ..Default::default()
     };
@@ -523,16 +529,22 @@ fn csog(
 ) -> Vec<u8> {
     use dlgs_encoder::{CanonicalCodec, EncoderConfig, SortSpec};
     let cfg = EncoderConfig {
-        canonical: CanonicalCodec::Sorted {
-            bits: dlgs::chunks::csog::QuantBits::MEDIUM,
-            sort: SortSpec::DEFAULT,
+        coding: dlgs_encoder::CanonicalSettings {
+            codec: CanonicalCodec::Sorted {
+                bits: dlgs::chunks::csog::QuantBits::MEDIUM,
+                sort: SortSpec::DEFAULT,
+            },
+            octree_positions,
+            rotation_coarsening,
+            compact_records,
+            ..Default::default()
         },
-        tier_weights,
-        octree_positions,
-        rotation_coarsening,
-        compact_records,
-        // lod3's bands 1-3 are zero everywhere; the vectors keep their channel records.
-        trim_zero_sh_bands: false,
+        still: dlgs_encoder::StillTools {
+            tier_weights,
+            // lod3's bands 1-3 are zero everywhere; the vectors keep their channel records.
+            trim_zero_sh_bands: false,
+            ..Default::default()
+        },
         ..Default::default()
     };
     dlgs_encoder::encode_still(g, cfg, Vec::new()).unwrap()

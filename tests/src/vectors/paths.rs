@@ -132,9 +132,12 @@ fn small_dynamic(
     };
     let m = synth_dynamic(&first(scene, 128), &spec).unwrap();
     let cfg = dlgs_encoder::EncoderConfig {
-        features,
-        per_gop_range,
-        mlp_weights: WeightType::F16,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features,
+            per_gop_range,
+            mlp_weights: WeightType::F16,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let bytes = write_model(&m, cfg, Vec::new()).unwrap();
@@ -158,8 +161,11 @@ fn tfea_reference(scene: &Gaussians) -> Vec<u8> {
     let mut r = FileReader::open(std::io::Cursor::new(&one)).unwrap();
     let s = r.scene().clone();
     let cfg = dlgs_encoder::EncoderConfig {
-        features: hevc(),
-        mlp_weights: WeightType::F16,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: hevc(),
+            mlp_weights: WeightType::F16,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let mut enc = dlgs_encoder::StreamEncoder::new(Vec::new(), s.clone(), cfg).unwrap();
@@ -209,9 +215,12 @@ fn residual_scene(
     };
     let m = synth_dynamic(&first(scene, 128), &spec).unwrap();
     let cfg = dlgs_encoder::EncoderConfig {
-        features: dlgs_encoder::FeatureCodec::Exact,
-        residual,
-        mlp_weights: WeightType::F16,
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: dlgs_encoder::FeatureCodec::Exact,
+            residual,
+            mlp_weights: WeightType::F16,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let mut enc = StreamEncoder::new(Vec::new(), m.scene.clone(), cfg).unwrap();
