@@ -36,13 +36,19 @@
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh;
 # target/peers-large-shuffled: DLGS_SCENES=$PWD/target/big_shuf.ply bash scripts/peers.sh target/peers-large-shuffled;
 # and target/peers-wave: DLGS_SCENES=sequence/playcanvas_wave_200f/wave_0001.sog bash scripts/peers.sh target/peers-wave)
+# BYTES=1 [DLGS=path/to/dlgs]: only encode each row and print its bytes and the SHA-256 of the file
+# after its 12-byte signature (the minor version there changes with every format revision): the
+# check that a change leaves every goal row's file byte for byte the same (run it with the old and
+# the new binary and diff the outputs); no peers needed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${DLGS_DATA:-../shared/data}
 OUT=${OUT:-target/goal_rows}
 mkdir -p "$OUT"
-cargo build --release -q -p dlgs-cli
-DLGS=target/release/dlgs
+if [ -z "${DLGS:-}" ]; then
+  cargo build --release -q -p dlgs-cli
+  DLGS=target/release/dlgs
+fi
 source scripts/real_scenes.sh
 export RUST_BACKTRACE=0
 [ -f target/big.ply ] || cargo run --release -q -p dlgs-render --example write_big_scene -- target/big.ply
@@ -51,7 +57,9 @@ export RUST_BACKTRACE=0
 metric() { $DLGS compare "$1" "$2" --orbit "${3:-8}" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
 peer() { awk -F'\t' -v n="$2" -v f="$3" '$1==n && $2==f {print $3}' "$1/times.tsv"; }
 WIDE=${WIDE-32}
-if [ -n "$WIDE" ] && [ "$WIDE" != 0 ]; then
+if [ "${BYTES:-0}" = 1 ]; then
+  echo "scene bytes sha256-after-signature"
+elif [ -n "$WIDE" ] && [ "$WIDE" != 0 ]; then
   echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB (SOG's) | SSIM (SOG's) | encode s | PSNR dB on $WIDE views (SOG's) |"
   echo "|---|---|---|---|---|---|---|---|---|"
 else
@@ -62,6 +70,11 @@ row() { # peers_dir scene_file options...
   local peers=$1 src=$2; shift 2
   local name; name=$(basename "${src%.*}")
   local f="$OUT/$name.dlgs" sog spz start end
+  if [ "${BYTES:-0}" = 1 ]; then
+    $DLGS encode "$src" -o "$f" "$@" > /dev/null
+    printf '%s %s %s\n' "$name" "$(stat -c %s "$f")" "$(tail -c +13 "$f" | sha256sum | cut -c1-16)"
+    return
+  fi
   sog=$(peer "$peers" "$name" sog); spz=$(peer "$peers" "$name" spz)
   read -r sp ss <<< "$(metric "$src" "$peers/$name.sog.ply")"
   if [ "${TARGET:-0}" = 1 ]; then set -- --no-meta --target-psnr "$sp"; fi

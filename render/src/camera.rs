@@ -6,6 +6,8 @@ use serde::Deserialize;
 
 use dlgs::Gaussians;
 
+use crate::RenderError;
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct Camera {
     pub width: u32,
@@ -101,16 +103,16 @@ struct JsonCamera {
 
 /// Parse a 3DGS `cameras.json` (list of {width, height, position, rotation (camera-to-world,
 /// rows), fx, fy}).
-pub fn cameras_from_json(text: &str) -> Result<Vec<Camera>, String> {
+pub fn cameras_from_json(text: &str) -> Result<Vec<Camera>, RenderError> {
     let list: Vec<JsonCamera> =
-        serde_json::from_str(text).map_err(|e| format!("cameras.json: {e}"))?;
+        serde_json::from_str(text).map_err(|e| RenderError::Cameras(e.to_string()))?;
     list.into_iter()
         .map(|c| {
             if c.width == 0 || c.height == 0 || !(c.fx > 0.0) || !(c.fy > 0.0) {
-                return Err(format!(
+                return Err(RenderError::Cameras(format!(
                     "camera {}: width, height, fx and fy must be positive",
                     c.id
-                ));
+                )));
             }
             let r = c.rotation;
             let c2w = Mat3::from_cols(

@@ -597,7 +597,11 @@ mod tests {
             / cams.len() as f64
     }
 
-    fn render(g: &Gaussians, c: &Camera, o: &crate::RenderOptions) -> Result<crate::Image, String> {
+    fn render(
+        g: &Gaussians,
+        c: &Camera,
+        o: &crate::RenderOptions,
+    ) -> Result<crate::Image, crate::RenderError> {
         crate::render(g, c, o)
     }
 }

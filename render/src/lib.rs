@@ -8,6 +8,7 @@
 pub mod camera;
 pub mod colour_fit;
 pub mod contribution;
+mod error;
 pub mod fastexp;
 pub mod image_out;
 pub mod metrics;
@@ -16,6 +17,7 @@ pub mod project;
 pub mod raster;
 pub mod sh;
 
+pub use error::RenderError;
 use std::time::Instant;
 
 pub use camera::{cameras_from_json, orbit_cameras, Camera, OrbitSpec};
@@ -69,17 +71,17 @@ pub const MAX_SIDE: u32 = 16384;
 
 /// Render `g` from `cam`. Language is rendered only if `opts.features` and the Gaussians
 /// carry language.
-pub fn render(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Result<Image, String> {
+pub fn render(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Result<Image, RenderError> {
     if cam.width == 0 || cam.height == 0 || cam.width > MAX_SIDE || cam.height > MAX_SIDE {
-        return Err(format!(
-            "image size {}x{} outside 1..={MAX_SIDE}",
-            cam.width, cam.height
-        ));
+        return Err(RenderError::ImageSize {
+            width: cam.width,
+            height: cam.height,
+        });
     }
-    g.check_shapes().map_err(|e| e.to_string())?;
+    g.check_shapes().map_err(RenderError::Scene)?;
     let with_lang = opts.features && g.has_language();
     if opts.features && !g.has_language() {
-        return Err("language features requested but the scene has none".into());
+        return Err(RenderError::NoLanguage);
     }
     let t0 = Instant::now();
     let splats = project::project_all(g, cam, with_lang);
