@@ -167,6 +167,17 @@ impl PutLe for Vec<u8> {
     }
 }
 
+/// Compress `data` as one zstd frame at `level` (zstd clamps the level to its range); a
+/// failure of the library is reported as `InvalidInput`, the same in every chunk.
+pub fn zstd_compress(data: &[u8], level: i32) -> Result<Vec<u8>> {
+    zstd::bulk::compress(data, level).map_err(|e| {
+        Error::new(
+            ErrorKind::InvalidInput(format!("zstd level {level}: {e}")),
+            0,
+        )
+    })
+}
+
 /// Decompress one zstd frame that must yield exactly `len` bytes (never more is allocated);
 /// anything else is `Decompress` at `at`. Check `len` against the limits first.
 pub fn zstd_exact(data: &[u8], len: u64, at: u64) -> Result<Vec<u8>> {

@@ -79,9 +79,10 @@ pub enum ErrorKind {
         format: &'static str,
         reason: String,
     },
-    /// An I/O error from the underlying reader or writer.
-    #[error("I/O: {0}")]
-    Io(String),
+    /// An I/O error from the underlying reader or writer: what was being done, and the
+    /// operating system's error itself (`std::error::Error::source` of [`Error`]).
+    #[error("I/O: {what}: {source}")]
+    Io { what: String, source: IoSource },
     /// The caller asked for something the file does not have (e.g. GOP 9 of 5).
     #[error("request: {0}")]
     Request(String),
@@ -131,7 +132,7 @@ impl Error {
             ErrorKind::Payload { .. } => "Payload",
             ErrorKind::Decompress(_) => "Decompress",
             ErrorKind::Foreign { .. } => "Foreign",
-            ErrorKind::Io(_) => "Io",
+            ErrorKind::Io { .. } => "Io",
             ErrorKind::Request(_) => "Request",
             ErrorKind::InvalidInput(_) => "InvalidInput",
             ErrorKind::NoHevcDecoder => "NoHevcDecoder",
@@ -145,7 +146,52 @@ impl fmt::Display for Error {
     }
 }
 
-impl std::error::Error for Error {}
+impl std::error::Error for Error {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match &self.kind {
+            ErrorKind::Io { source, .. } => Some(source.0.as_ref()),
+            _ => None,
+        }
+    }
+}
+
+/// The `std::io::Error` behind [`ErrorKind::Io`], shared so errors stay `Clone`; two are equal
+/// when their kind and message are.
+#[derive(Debug, Clone)]
+pub struct IoSource(pub std::sync::Arc<std::io::Error>);
+
+impl PartialEq for IoSource {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.kind() == other.0.kind() && self.0.to_string() == other.0.to_string()
+    }
+}
+
+impl Eq for IoSource {}
+
+impl std::error::Error for IoSource {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(self.0.as_ref())
+    }
+}
+
+impl fmt::Display for IoSource {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl Error {
+    /// An I/O failure while doing `what` (e.g. "reading scene.ply"), keeping its source.
+    pub fn io(what: impl Into<String>, source: std::io::Error, offset: u64) -> Error {
+        Error::new(
+            ErrorKind::Io {
+                what: what.into(),
+                source: IoSource(std::sync::Arc::new(source)),
+            },
+            offset,
+        )
+    }
+}
 
 pub type Result<T> = std::result::Result<T, Error>;
 
@@ -161,6 +207,25 @@ pub(crate) fn io_err(e: std::io::Error, offset: u64, what: &'static str) -> Erro
             offset,
         )
     } else {
-        Error::new(ErrorKind::Io(e.to_string()), offset)
+        Error::io(what, e, offset)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn io_errors_keep_their_source_and_say_what_failed() {
+        let missing = std::path::Path::new("/nonexistent/dlgs-scene.ply");
+        let e = crate::interop::read_splat_file(missing).unwrap_err();
+        assert_eq!(e.name(), "Io");
+        assert!(e.to_string().contains("dlgs-scene.ply"), "{e}");
+        let source = std::error::Error::source(&e).expect("the io::Error");
+        let io = source
+            .downcast_ref::<std::io::Error>()
+            .expect("an io::Error");
+        assert_eq!(io.kind(), std::io::ErrorKind::NotFound);
+        assert_eq!(e.clone(), e, "errors stay comparable");
     }
 }

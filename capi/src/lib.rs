@@ -116,7 +116,7 @@ fn fail(status: DlgsStatus, msg: impl Into<String>) -> DlgsStatus {
 
 fn format_error(e: dlgs::Error) -> DlgsStatus {
     let status = match e.kind {
-        dlgs::ErrorKind::Io(_) => DlgsStatus::Io,
+        dlgs::ErrorKind::Io { .. } => DlgsStatus::Io,
         dlgs::ErrorKind::NoHevcDecoder => DlgsStatus::NoHevcDecoder,
         _ => DlgsStatus::Format,
     };

@@ -116,12 +116,8 @@ pub struct Decoder<R: Read + Seek> {
 
 impl Decoder<BufReader<File>> {
     pub fn open_path(path: impl AsRef<Path>) -> Result<Self> {
-        let f = File::open(path.as_ref()).map_err(|e| {
-            Error::new(
-                ErrorKind::Io(format!("{}: {e}", path.as_ref().display())),
-                0,
-            )
-        })?;
+        let f = File::open(path.as_ref())
+            .map_err(|e| Error::io(format!("opening {}", path.as_ref().display()), e, 0))?;
         Self::new(BufReader::new(f), Limits::default())
     }
 }

@@ -75,8 +75,7 @@ pub fn encode(c: &Canonical, codec: RawCodec, zstd_level: i32) -> Result<Vec<u8>
     match codec {
         RawCodec::None => p.extend_from_slice(&body),
         RawCodec::Zstd => {
-            let z = zstd::bulk::compress(&body, zstd_level)
-                .map_err(|e| Error::new(ErrorKind::Io(e.to_string()), 0))?;
+            let z = crate::bytes::zstd_compress(&body, zstd_level)?;
             p.extend_from_slice(&z);
         }
     }

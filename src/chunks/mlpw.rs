@@ -85,8 +85,7 @@ pub fn encode(m: &DeformMlps, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>
             }
         }
     }
-    let z = zstd::bulk::compress(&raw, zstd_level)
-        .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
+    let z = crate::bytes::zstd_compress(&raw, zstd_level)?;
     b.put_u32(raw.len() as u32);
     b.extend_from_slice(&z);
     Ok(b)

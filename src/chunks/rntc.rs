@@ -177,8 +177,7 @@ pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<
     for v in f.mlp.params() {
         raw.put_f32(*v);
     }
-    let z = zstd::bulk::compress(&raw, zstd_level)
-        .map_err(|e| Error::new(ErrorKind::Io(e.to_string()), 0))?;
+    let z = crate::bytes::zstd_compress(&raw, zstd_level)?;
     out.put_u32(z.len() as u32);
     out.extend_from_slice(&z);
     Ok(out)

@@ -236,8 +236,7 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
             b.put_u32(0);
             let mut raw = Vec::with_capacity(f.data.len() * 4);
             raw.put_f32s(&f.data);
-            let z = zstd::bulk::compress(&raw, zstd_level)
-                .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
+            let z = crate::bytes::zstd_compress(&raw, zstd_level)?;
             b.extend_from_slice(&z);
         }
         TfeaBody::Hevc {

@@ -26,7 +26,7 @@ pub fn read_splat_file_with_limits(path: &std::path::Path, limits: &Limits) -> R
     if path.file_name().and_then(|n| n.to_str()) == Some("meta.json") {
         return sog::read_sog_dir(path, limits);
     }
-    let io = |e: std::io::Error| Error::new(ErrorKind::Io(format!("{}: {e}", path.display())), 0);
+    let io = |e: std::io::Error| Error::io(format!("reading {}", path.display()), e, 0);
     let size = std::fs::metadata(path).map_err(io)?.len();
     limits.check_alloc("splat file size", size, 0)?;
     let data = std::fs::read(path).map_err(io)?;

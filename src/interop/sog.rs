@@ -134,7 +134,7 @@ pub fn read_sog_dir(meta_json: &Path, limits: &Limits) -> Result<Gaussians> {
         }
         let path = dir.join(name);
         let file = std::fs::File::open(&path)
-            .map_err(|e| Error::new(ErrorKind::Io(format!("{}: {e}", path.display())), 0))?;
+            .map_err(|e| Error::io(format!("reading {}", path.display()), e, 0))?;
         read_bounded(file, name, limits)
     };
     let meta = load(
