@@ -213,8 +213,6 @@ pub(crate) fn io_err(e: std::io::Error, offset: u64, what: &'static str) -> Erro
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-
     #[test]
     fn io_errors_keep_their_source_and_say_what_failed() {
         let missing = std::path::Path::new("/nonexistent/dlgs-scene.ply");
