@@ -12,7 +12,9 @@ use crate::encode_cmd::{bar, CodecArgs};
 pub fn run_ingest(inputs: &[PathBuf], output: &Path, codec: &CodecArgs, fps: u32) -> Result<()> {
     let dirs = run::resolve(inputs)?;
     let pb = bar(dirs.len() as u64, "reading");
-    let gops = run::read_run(&dirs, |g| pb.set_position(g as u64 + 1))?;
+    let gops = run::read_run(&dirs, &dlgs::Limits::default(), |g| {
+        pb.set_position(g as u64 + 1)
+    })?;
     pb.finish_and_clear();
     let settings = codec.changed_settings();
     let meta = serde_json::json!({

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use dlgs::model::dynamic::{DeformMlps, MlpRole};
 use dlgs::model::TimeFeatures;
-use dlgs::Gaussians;
+use dlgs::{Gaussians, Limits};
 
 use crate::ref_gop::{self, FeatureSource, RefGop, SetTensors, CHANNELS, KEYS, LANG};
 use crate::torch::{self, Tensor};
@@ -27,10 +27,14 @@ struct StateDict {
 }
 
 impl StateDict {
-    fn open(dir: &Path, file: &str) -> Result<Self, IngestError> {
+    fn open(dir: &Path, file: &str, limits: &Limits) -> Result<Self, IngestError> {
         let path = dir.join(file);
         let what = path.display().to_string();
-        let bytes = ref_gop::read(&path, "a checkpoint (the GOP has no compression_info.csv)")?;
+        let bytes = ref_gop::read(
+            &path,
+            "a checkpoint (the GOP has no compression_info.csv)",
+            limits,
+        )?;
         let tensors = torch::read_zip_state_dict(std::io::Cursor::new(bytes), &what)?
             .into_iter()
             .collect();
@@ -165,23 +169,27 @@ fn gop(
 }
 
 /// GOP 0 from `model.pth`.
-pub fn read_first(dir: &Path) -> Result<RefGop, IngestError> {
-    let sd = StateDict::open(dir, CHECKPOINT)?;
-    let statics = sd.set(|a| format!("_{a}"))?.gaussians(&sd.what)?;
-    let dynamics = sd.set(|a| format!("_{a}_dynamic"))?.gaussians(&sd.what)?;
+pub fn read_first(dir: &Path, limits: &Limits) -> Result<RefGop, IngestError> {
+    let sd = StateDict::open(dir, CHECKPOINT, limits)?;
+    let statics = sd.set(|a| format!("_{a}"))?.gaussians(&sd.what, limits)?;
+    let dynamics = sd
+        .set(|a| format!("_{a}_dynamic"))?
+        .gaussians(&sd.what, limits)?;
     gop(dir, &sd, statics, dynamics, false)
 }
 
 /// GOP g >= 1 from `model_offset.pth`: the dynamic set's accumulated `_<attr>_dynamic_offset`
 /// values, and the static set's `_<attr>_offset` when present (`offset_mode >= 10`), else the
 /// previous GOP's static set unchanged (the reference's `get_*_ori` for lower modes).
-pub fn read_next(dir: &Path, prev: &RefGop) -> Result<RefGop, IngestError> {
-    let sd = StateDict::open(dir, OFFSET_CHECKPOINT)?;
+pub fn read_next(dir: &Path, prev: &RefGop, limits: &Limits) -> Result<RefGop, IngestError> {
+    let sd = StateDict::open(dir, OFFSET_CHECKPOINT, limits)?;
     let dynamics = sd
         .set(|a| format!("_{a}_dynamic_offset"))?
-        .gaussians(&sd.what)?;
+        .gaussians(&sd.what, limits)?;
     let statics = match sd.get("_features_dc_offset") {
-        Some(_) => sd.set(|a| format!("_{a}_offset"))?.gaussians(&sd.what)?,
+        Some(_) => sd
+            .set(|a| format!("_{a}_offset"))?
+            .gaussians(&sd.what, limits)?,
         None => prev.statics.clone(),
     };
     for (now, before, set) in [

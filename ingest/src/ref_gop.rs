@@ -8,6 +8,8 @@ use dlgs::model::dynamic::{DeformMlps, Layer, Mlp, MlpRole};
 use dlgs::model::TimeFeatures;
 use dlgs::Gaussians;
 
+use dlgs::Limits;
+
 use crate::latents::LatentResidual;
 use crate::torch::Tensor;
 use crate::{check_finite, IngestError};
@@ -56,7 +58,11 @@ pub struct RefGop {
     pub files: Vec<RunFile>,
 }
 
-pub(crate) fn read(path: &Path, what: &str) -> Result<Vec<u8>, IngestError> {
+/// Read a file of the run whole, refusing one larger than `limits.max_alloc` before reading.
+pub(crate) fn read(path: &Path, what: &str, limits: &Limits) -> Result<Vec<u8>, IngestError> {
+    if let Ok(m) = std::fs::metadata(path) {
+        limits.check_alloc("reference run file size", m.len(), 0)?;
+    }
     std::fs::read(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => IngestError::Missing {
             path: path.to_path_buf(),
@@ -87,8 +93,9 @@ impl SetTensors {
         self.xyz.len() / 3
     }
 
-    pub(crate) fn gaussians(&self, what: &str) -> Result<Gaussians, IngestError> {
+    pub(crate) fn gaussians(&self, what: &str, limits: &Limits) -> Result<Gaussians, IngestError> {
         let n = self.count();
+        limits.check_gaussians("reference run Gaussians", n as u64, 0)?;
         let degree = match self.rest_channels {
             0 => 0,
             9 => 1,

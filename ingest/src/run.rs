@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use dlgs::chunks::tfea::{self, Tiling};
 use dlgs::model::dynamic::{DeformMlps, Mlp, MlpRole};
 use dlgs::model::TimeFeatures;
-use dlgs::Gaussians;
+use dlgs::{Gaussians, Limits};
 
 use crate::csv::{self, Row};
 use crate::latents::{self, LatentResidual};
@@ -92,6 +92,7 @@ fn attribute(
     rows: &[Row],
     name: &str,
     channels: usize,
+    limits: &Limits,
 ) -> Result<Vec<f32>, IngestError> {
     let row = csv::find(rows, name).ok_or_else(|| {
         IngestError::format(
@@ -101,7 +102,7 @@ fn attribute(
     })?;
     let path = dir.join(&row.file);
     let what = path.display().to_string();
-    let a = jxl::decode(&read(&path, name)?, &what)?;
+    let a = jxl::decode(&read(&path, name, limits)?, &what)?;
     if a.data.len() % channels != 0 {
         return Err(IngestError::shape(
             &what,
@@ -137,14 +138,19 @@ fn attribute(
     Ok(v)
 }
 
-fn read_set(dir: &Path, rows: &[Row], suffix: &str) -> Result<SetTensors, IngestError> {
+fn read_set(
+    dir: &Path,
+    rows: &[Row],
+    suffix: &str,
+    limits: &Limits,
+) -> Result<SetTensors, IngestError> {
     let name = |a: &str| format!("_{a}{suffix}");
     let rest_row = csv::find(rows, &name("features_rest"));
     let rest_channels = match rest_row {
         // The channel count follows from the image: read it once with its own shape.
         Some(r) => {
             let p = dir.join(&r.file);
-            let a = jxl::decode(&read(&p, "SH rest")?, &p.display().to_string())?;
+            let a = jxl::decode(&read(&p, "SH rest", limits)?, &p.display().to_string())?;
             if a.frames > 1 {
                 a.width
             } else {
@@ -156,19 +162,25 @@ fn read_set(dir: &Path, rows: &[Row], suffix: &str) -> Result<SetTensors, Ingest
     let has_lang = csv::find(rows, &name("language_feature")).is_some();
     let opacity_dim = if has_lang { 2 } else { 1 };
     let set = SetTensors {
-        xyz: attribute(dir, rows, &name("xyz"), 3)?,
-        dc: attribute(dir, rows, &name("features_dc"), 3)?,
+        xyz: attribute(dir, rows, &name("xyz"), 3, limits)?,
+        dc: attribute(dir, rows, &name("features_dc"), 3, limits)?,
         rest: if rest_channels > 0 {
-            attribute(dir, rows, &name("features_rest"), rest_channels)?
+            attribute(dir, rows, &name("features_rest"), rest_channels, limits)?
         } else {
             vec![]
         },
-        scaling: attribute(dir, rows, &name("scaling"), 3)?,
-        rotation: attribute(dir, rows, &name("rotation"), 4)?,
-        opacity: attribute(dir, rows, &name("opacity"), opacity_dim)?,
+        scaling: attribute(dir, rows, &name("scaling"), 3, limits)?,
+        rotation: attribute(dir, rows, &name("rotation"), 4, limits)?,
+        opacity: attribute(dir, rows, &name("opacity"), opacity_dim, limits)?,
         opacity_dim,
         lang: if has_lang {
-            Some(attribute(dir, rows, &name("language_feature"), LANG)?)
+            Some(attribute(
+                dir,
+                rows,
+                &name("language_feature"),
+                LANG,
+                limits,
+            )?)
         } else {
             None
         },
@@ -236,22 +248,27 @@ fn read_features(
 }
 
 /// `nn.Sequential(Linear(i, 64, bias=False), ReLU, Linear(64, o, bias=False)[, Tanh])` weights.
-fn read_mlp(dir: &Path, file: &str, role: MlpRole) -> Result<Mlp, IngestError> {
+fn read_mlp(dir: &Path, file: &str, role: MlpRole, limits: &Limits) -> Result<Mlp, IngestError> {
     let path = dir.join(file);
     let what = path.display().to_string();
-    let bytes = read(&path, "a deformation decoder")?;
+    let bytes = read(&path, "a deformation decoder", limits)?;
     let tensors = torch::read_zip_state_dict(std::io::Cursor::new(bytes), &what)?;
     mlp_from_state(tensors.iter().map(|(k, t)| (k.as_str(), t)), role, &what)
 }
 
-fn read_mlps(dir: &Path, language: bool, scale_offsets: bool) -> Result<DeformMlps, IngestError> {
+fn read_mlps(
+    dir: &Path,
+    language: bool,
+    scale_offsets: bool,
+    limits: &Limits,
+) -> Result<DeformMlps, IngestError> {
     Ok(DeformMlps {
-        deform: read_mlp(dir, "mlp_deform.pth", MlpRole::Deform)?,
-        cov: read_mlp(dir, "mlp_cov.pth", MlpRole::Cov)?,
-        opacity: read_mlp(dir, "mlp_opacity.pth", MlpRole::Opacity)?,
-        color: read_mlp(dir, "mlp_color.pth", MlpRole::Color)?,
+        deform: read_mlp(dir, "mlp_deform.pth", MlpRole::Deform, limits)?,
+        cov: read_mlp(dir, "mlp_cov.pth", MlpRole::Cov, limits)?,
+        opacity: read_mlp(dir, "mlp_opacity.pth", MlpRole::Opacity, limits)?,
+        color: read_mlp(dir, "mlp_color.pth", MlpRole::Color, limits)?,
         lang: if language {
-            Some(read_mlp(dir, "mlp_lang.pth", MlpRole::Lang)?)
+            Some(read_mlp(dir, "mlp_lang.pth", MlpRole::Lang, limits)?)
         } else {
             None
         },
@@ -305,25 +322,27 @@ pub(crate) fn list_files(dir: &Path, first: bool, language: bool) -> Vec<RunFile
         .collect()
 }
 
-fn csv_rows(dir: &Path) -> Result<Vec<Row>, IngestError> {
+fn csv_rows(dir: &Path, limits: &Limits) -> Result<Vec<Row>, IngestError> {
     let path = dir.join("compression_info.csv");
     let what = path.display().to_string();
-    let text = String::from_utf8(read(&path, "the attribute ranges")?)
+    let text = String::from_utf8(read(&path, "the attribute ranges", limits)?)
         .map_err(|_| IngestError::format(&what, "not UTF-8"))?;
     csv::parse(&text, &what)
 }
 
 /// Read GOP 0 (full canonical state).
-pub fn read_first(dir: &Path) -> Result<RefGop, IngestError> {
-    let rows = csv_rows(dir)?;
-    let statics = read_set(dir, &rows, "")?.gaussians(&dir.display().to_string())?;
-    let dynamics = read_set(dir, &rows, "_dynamic")?.gaussians(&dir.display().to_string())?;
+pub fn read_first(dir: &Path, limits: &Limits) -> Result<RefGop, IngestError> {
+    let rows = csv_rows(dir, limits)?;
+    let statics =
+        read_set(dir, &rows, "", limits)?.gaussians(&dir.display().to_string(), limits)?;
+    let dynamics =
+        read_set(dir, &rows, "_dynamic", limits)?.gaussians(&dir.display().to_string(), limits)?;
     check_sets(&statics, &dynamics, &dir.display().to_string())?;
     let language = statics.lang_width > 0;
     let (features, feature_source) = read_features(dir, &rows, dynamics.len())?;
     Ok(RefGop {
         dir: dir.to_path_buf(),
-        mlps: read_mlps(dir, language, false)?,
+        mlps: read_mlps(dir, language, false, limits)?,
         files: list_files(dir, true, language),
         statics,
         dynamics,
@@ -419,11 +438,11 @@ pub fn apply_latent(r: &LatentResidual, g: &mut Gaussians) -> Result<(), IngestE
 }
 
 /// Read GOP g >= 1 on top of the previous GOP's decoded state.
-pub fn read_next(dir: &Path, prev: &RefGop) -> Result<RefGop, IngestError> {
-    let rows = csv_rows(dir)?;
+pub fn read_next(dir: &Path, prev: &RefGop, limits: &Limits) -> Result<RefGop, IngestError> {
+    let rows = csv_rows(dir, limits)?;
     let pkl = dir.join("offset_compressed.pkl");
     let what = pkl.display().to_string();
-    let latents = latents::read(&read(&pkl, "the GOP's latent residuals")?, &what)?;
+    let latents = latents::read(&read(&pkl, "the GOP's latent residuals", limits)?, &what)?;
     let (mut statics, mut dynamics) = (prev.statics.clone(), prev.dynamics.clone());
     for r in &latents {
         let (_, dynamic) = latent_target(&r.name).ok_or_else(|| {
@@ -436,7 +455,7 @@ pub fn read_next(dir: &Path, prev: &RefGop) -> Result<RefGop, IngestError> {
         ("_xyz_offset", &mut statics),
         ("_xyz_dynamic_offset", &mut dynamics),
     ] {
-        let xyz = attribute(dir, &rows, name, 3)?;
+        let xyz = attribute(dir, &rows, name, 3, limits)?;
         if xyz.len() != 3 * set.len() {
             return Err(IngestError::shape(
                 &format!("{}/{name}", dir.display()),
@@ -458,7 +477,7 @@ pub fn read_next(dir: &Path, prev: &RefGop) -> Result<RefGop, IngestError> {
     let (features, feature_source) = read_features(dir, &rows, dynamics.len())?;
     Ok(RefGop {
         dir: dir.to_path_buf(),
-        mlps: read_mlps(dir, language, true)?,
+        mlps: read_mlps(dir, language, true, limits)?,
         files: list_files(dir, false, language),
         statics,
         dynamics,
@@ -469,8 +488,11 @@ pub fn read_next(dir: &Path, prev: &RefGop) -> Result<RefGop, IngestError> {
 }
 
 /// Read a whole run: GOP 0 then each following GOP on top of the previous one.
+/// Every file is read within `limits` (file sizes against `max_alloc`, Gaussian counts
+/// against `max_gaussians`).
 pub fn read_run(
     dirs: &[PathBuf],
+    limits: &Limits,
     mut progress: impl FnMut(usize),
 ) -> Result<Vec<RefGop>, IngestError> {
     let mut gops: Vec<RefGop> = Vec::with_capacity(dirs.len());
@@ -478,10 +500,10 @@ pub fn read_run(
         // The compressed files win where both exist: they are what the reference's own
         // player decodes; the checkpoints hold the values before compression.
         let gop = match (gops.last(), has_compressed(d)) {
-            (None, true) => read_first(d)?,
-            (None, false) => checkpoint::read_first(d)?,
-            (Some(prev), true) => read_next(d, prev)?,
-            (Some(prev), false) => checkpoint::read_next(d, prev)?,
+            (None, true) => read_first(d, limits)?,
+            (None, false) => checkpoint::read_first(d, limits)?,
+            (Some(prev), true) => read_next(d, prev, limits)?,
+            (Some(prev), false) => checkpoint::read_next(d, prev, limits)?,
         };
         gops.push(gop);
         progress(g);

@@ -27,7 +27,7 @@ fn gop_dirs() -> Vec<PathBuf> {
 }
 
 fn read_all() -> Vec<RefGop> {
-    run::read_run(&gop_dirs(), |_| {}).unwrap()
+    run::read_run(&gop_dirs(), &dlgs::Limits::default(), |_| {}).unwrap()
 }
 
 struct Reference(Vec<u8>);
@@ -268,7 +268,7 @@ fn copy_fixture() -> (tempfile::TempDir, Vec<PathBuf>) {
 }
 
 fn read_error(dirs: &[PathBuf]) -> String {
-    match run::read_run(dirs, |_| {}) {
+    match run::read_run(dirs, &dlgs::Limits::default(), |_| {}) {
         Ok(_) => panic!("expected an error"),
         Err(e) => e.to_string(),
     }
@@ -318,7 +318,7 @@ fn damaged_runs_give_clear_errors() {
     let p = g0.join("mlp_cov.pth");
     let saved = std::fs::read(&p).unwrap();
     std::fs::copy(g0.join("mlp_lang.pth"), &p).unwrap();
-    let gops = run::read_run(&dirs, |_| {}).unwrap();
+    let gops = run::read_run(&dirs, &dlgs::Limits::default(), |_| {}).unwrap();
     let e = convert::encode(&gops, 30, EncoderConfig::default(), Vec::new(), |_| {}).unwrap_err();
     assert!(e.to_string().contains("cov"), "{e}");
     restore(&p, &saved);
@@ -387,7 +387,7 @@ fn a_run_with_only_checkpoints_reads_them_and_compressed_files_win_otherwise() {
     let (tmp, dirs) = checkpoint_only_run();
     // The scene folder resolves to the two GOP folders as for a compressed run.
     assert_eq!(run::resolve(&[tmp.path().to_path_buf()]).unwrap(), dirs);
-    let gops = run::read_run(&dirs, |_| {}).unwrap();
+    let gops = run::read_run(&dirs, &dlgs::Limits::default(), |_| {}).unwrap();
     let compressed = read_all();
     for (g, gop) in gops.iter().enumerate() {
         let r = Reference(
@@ -494,7 +494,7 @@ fn a_run_with_only_checkpoints_reads_them_and_compressed_files_win_otherwise() {
         std::io::Write::write_all(&mut out, &bytes).unwrap();
     }
     std::fs::write(&p, out.finish().unwrap().into_inner()).unwrap();
-    match run::read_run(&dirs, |_| {}) {
+    match run::read_run(&dirs, &dlgs::Limits::default(), |_| {}) {
         Err(e @ IngestError::NonFinite { .. }) => {
             assert!(e.to_string().contains("model.pth"), "{e}")
         }
@@ -566,4 +566,25 @@ fn near_lossless_is_under_70_percent_of_the_reference_and_renders_above_60_db() 
     }
     println!("near-lossless: worst PSNR vs lossless over 4 times x 4 cameras {worst:.2} dB");
     assert!(worst >= 60.0, "{worst} dB");
+}
+
+/// Ingest draws on the same limits as every other reader: a fixture's files over a small
+/// `max_alloc`, or its Gaussians over a small `max_gaussians`, are refused with the limit named.
+#[test]
+fn ingest_stays_within_the_limits() {
+    let dirs = gop_dirs();
+    for limits in [
+        dlgs::Limits {
+            max_alloc: 64,
+            ..dlgs::Limits::default()
+        },
+        dlgs::Limits {
+            max_gaussians: 3,
+            ..dlgs::Limits::default()
+        },
+    ] {
+        let e = run::read_run(&dirs, &limits, |_| {}).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains("limit exceeded"), "{text}");
+    }
 }
