@@ -27,6 +27,79 @@ const EXP_DEGREE: usize = 13;
 /// `asin` series terms (`z <= 1/4`).
 const ASIN_TERMS: usize = 27;
 
+// The coefficients, evaluated once at compile time with the same binary64 operations the
+// spec writes (Rust's constant evaluation is IEEE 754 binary64 with round to nearest even, so
+// these are the bits a run-time evaluation gives).
+
+/// `LN_C[k] = 2 / (2k + 1)`.
+const LN_C: [f64; LN_TERMS + 1] = {
+    let mut c = [0.0; LN_TERMS + 1];
+    let mut k = 1;
+    while k <= LN_TERMS {
+        c[k] = 2.0 / (2 * k + 1) as f64;
+        k += 1;
+    }
+    c
+};
+
+/// `n!` as a binary64: products from 1.0, left to right (exact for `n <= 18`).
+const fn factorial(n: usize) -> f64 {
+    let mut a = 1.0;
+    let mut i = 1;
+    while i <= n {
+        a *= i as f64;
+        i += 1;
+    }
+    a
+}
+
+/// `EXP_C[j] = 1 / j!`.
+const EXP_C: [f64; EXP_DEGREE + 1] = {
+    let mut c = [0.0; EXP_DEGREE + 1];
+    let mut j = 1;
+    while j <= EXP_DEGREE {
+        c[j] = 1.0 / factorial(j);
+        j += 1;
+    }
+    c
+};
+
+/// `SIN_C[j] = (-1)^j / (2j + 1)!`, `COS_C[j] = (-1)^j / (2j)!`, for `j` in 1..=8.
+const SIN_C: [f64; 9] = {
+    let mut c = [0.0; 9];
+    let mut j = 1;
+    while j <= 8 {
+        let sign = if j % 2 == 1 { -1.0 } else { 1.0 };
+        c[j] = sign / factorial(2 * j + 1);
+        j += 1;
+    }
+    c
+};
+const COS_C: [f64; 9] = {
+    let mut c = [0.0; 9];
+    let mut j = 1;
+    while j <= 8 {
+        let sign = if j % 2 == 1 { -1.0 } else { 1.0 };
+        c[j] = sign / factorial(2 * j);
+        j += 1;
+    }
+    c
+};
+
+/// `ASIN_C[n] = (2n)! / (4^n (n!)^2 (2n + 1))`, the product `(2n-1)!!/(2n)!!` built term by
+/// term: `t = (t * (2n - 1)) / (2n)`, `ASIN_C[n] = t / (2n + 1)`.
+const ASIN_C: [f64; ASIN_TERMS] = {
+    let mut c = [0.0; ASIN_TERMS];
+    let mut t = 1.0;
+    let mut n = 1;
+    while n < ASIN_TERMS {
+        t = t * (2 * n - 1) as f64 / (2 * n) as f64;
+        c[n] = t / (2 * n + 1) as f64;
+        n += 1;
+    }
+    c
+};
+
 /// Natural logarithm, binary64. `ln(0) = -inf`, `ln(+inf) = +inf`, negative or NaN: NaN.
 pub fn ln(x: f64) -> f64 {
     if x.is_nan() || x < 0.0 {
@@ -58,7 +131,7 @@ pub fn ln(x: f64) -> f64 {
     let z = s * s;
     let mut r = 0.0;
     for k in (1..=LN_TERMS).rev() {
-        r = (r + 2.0 / (2 * k + 1) as f64) * z;
+        r = (r + LN_C[k]) * z;
     }
     let hfsq = 0.5 * f * f;
     let dk = e as f64;
@@ -81,16 +154,11 @@ pub fn exp(x: f64) -> f64 {
     let r = (x - k * LN2_HI) - k * LN2_LO;
     let mut p = 0.0;
     for j in (1..=EXP_DEGREE).rev() {
-        p = (p + 1.0 / factorial(j)) * r;
+        p = (p + EXP_C[j]) * r;
     }
     let p = p + 1.0;
     // k in [-1022, 1023]: 2^k is a normal binary64.
     p * f64::from_bits(((k as i64 + 1023) as u64) << 52)
-}
-
-/// `n!` as a binary64 (exact for `n <= 18`).
-fn factorial(n: usize) -> f64 {
-    (1..=n).fold(1.0, |a, i| a * i as f64)
 }
 
 /// `sin x`, binary64, for finite `x` (accurate for `|x| < 2^20 π/2`); non-finite: NaN.
@@ -105,9 +173,8 @@ pub fn sin(x: f64) -> f64 {
     let mut ps = 0.0;
     let mut pc = 0.0;
     for j in (1..=8).rev() {
-        let sign = if j % 2 == 1 { -1.0 } else { 1.0 };
-        ps = (ps + sign / factorial(2 * j + 1)) * z;
-        pc = (pc + sign / factorial(2 * j)) * z;
+        ps = (ps + SIN_C[j]) * z;
+        pc = (pc + COS_C[j]) * z;
     }
     let (s, c) = (r + r * ps, 1.0 + pc);
     match (k as i64).rem_euclid(4) {
@@ -121,16 +188,9 @@ pub fn sin(x: f64) -> f64 {
 /// `asin y` for `|y| <= 1/2` by its Taylor series in `z = y^2`.
 fn asin_small(y: f64) -> f64 {
     let z = y * y;
-    // a_n = (2n)! / (4^n (n!)^2 (2n + 1)); the product (2n-1)!!/(2n)!! built term by term.
-    let mut coeffs = [0.0; ASIN_TERMS];
-    let mut ratio = 1.0;
-    for (n, c) in coeffs.iter_mut().enumerate().skip(1) {
-        ratio = ratio * (2 * n - 1) as f64 / (2 * n) as f64;
-        *c = ratio / (2 * n + 1) as f64;
-    }
     let mut p = 0.0;
     for n in (1..ASIN_TERMS).rev() {
-        p = (p + coeffs[n]) * z;
+        p = (p + ASIN_C[n]) * z;
     }
     y + y * p
 }
