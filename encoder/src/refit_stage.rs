@@ -8,7 +8,11 @@ use dlgs::Result;
 
 use crate::colour_refit;
 use crate::config::RefitSettings;
-use crate::stream::CodeParts;
+
+/// Codes a canonical GOP's static parts: the `CSOG` payload and, per decoded static Gaussian,
+/// its index in the parts' concatenation.
+pub(crate) type CodeParts<'a> =
+    dyn Fn(&[(dlgs::Gaussians, QuantBits)]) -> Result<(Vec<u8>, Vec<u32>)> + 'a;
 
 /// A coded canonical GOP: the `CSOG` payload and the stored order of its static Gaussians.
 type Coded = (Vec<u8>, Vec<u32>);

@@ -21,11 +21,6 @@ use dlgs::{Canonical, Error, ErrorKind, Result};
 use crate::refit_stage::{self, RefitReport};
 use crate::{bit_allocation, grid_sort, importance, orientation};
 
-/// Codes a canonical GOP's static parts: the `CSOG` payload and, per decoded static Gaussian,
-/// its index in the parts' concatenation.
-pub(crate) type CodeParts<'a> =
-    dyn Fn(&[(dlgs::Gaussians, QuantBits)]) -> Result<(Vec<u8>, Vec<u32>)> + 'a;
-
 /// Writes one GOP at a time, in order.
 pub struct StreamEncoder<W: Write> {
     writer: Writer<W>,
