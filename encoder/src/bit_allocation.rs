@@ -16,7 +16,7 @@
 use dlgs::chunks::csog::{self, QuantBits, RotationCoarsening};
 use dlgs::model::{Canonical, Gaussians};
 use dlgs::{Limits, Result};
-use dlgs_render::{metrics, orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
+use dlgs_render::{metrics, render, Camera, RenderOptions};
 
 /// Attribute groups whose bits are moved (language is not rendered in colour and keeps its
 /// bits).
@@ -150,14 +150,7 @@ pub fn reallocate(
     coarsening: Option<RotationCoarsening>,
     mut progress: impl FnMut(&Move),
 ) -> Result<Allocation> {
-    let spec = OrbitSpec {
-        count: 5,
-        width: 400,
-        height: 300,
-        elevation_deg: 35.0,
-        ..Default::default()
-    };
-    let cams = orbit_cameras(g, &spec);
+    let cams = crate::judge_views::allocation_views(g);
     let judge = Judge {
         canon: Canonical::from_static(g.clone()),
         scene: dlgs::container::SceneHeader::still(g.len() as u32, g.sh_degree),

@@ -15,56 +15,15 @@ use dlgs_render::colour_fit::{fit_colour_offsets, snap_colour_offsets};
 use dlgs_render::metrics::psnr;
 use dlgs_render::opacity_fit::{logit, snap_opacities, OpacityLattice};
 use dlgs_render::sh::C0;
-use dlgs_render::{orbit_cameras, render, Camera, OrbitSpec, RenderOptions};
-use glam::Vec3;
+use dlgs_render::{render, Camera, RenderOptions};
 
-use crate::importance::importance_views;
+pub use crate::judge_views::{fit_views, holdout_views};
 
 /// CGLS steps of the fit.
 const ITERATIONS: usize = 4;
 /// Damping of the fit, in squared blending weight summed over the fit's pixels: a Gaussian
 /// that covers a few pixels of the 320x240 views moves little.
 const DAMPING: f64 = 3.0;
-
-/// The views the fit matches: [`importance_views`] (640x480) with `full_size`, else at half
-/// their size (320x240), 4x fewer pixels: on lod3's goal row the colour refit reaches 51.58 dB
-/// on the benchmark's views from full-size views, 51.31 from half-size ones, in 5x the time
-/// (docs/benchmarks/canonical-levers.md "Opacity refit").
-pub fn fit_views(g: &Gaussians, full_size: bool) -> Vec<Camera> {
-    let views = importance_views(g);
-    if full_size {
-        return views;
-    }
-    views
-        .iter()
-        .map(|c| c.resized(c.width / 2, c.height / 2))
-        .collect()
-}
-
-/// The views the fit is judged on: orbits around four diagonal up axes (none of
-/// [`importance_views`]'s), three azimuths each in the orbit plane, 640x480.
-pub fn holdout_views(g: &Gaussians) -> Vec<Camera> {
-    let mut cams = Vec::new();
-    for up in [
-        Vec3::new(1.0, -1.0, 0.0),
-        Vec3::new(0.0, -1.0, 1.0),
-        Vec3::new(1.0, 0.0, 1.0),
-        Vec3::new(-1.0, -1.0, 1.0),
-    ] {
-        cams.extend(orbit_cameras(
-            g,
-            &OrbitSpec {
-                count: 3,
-                width: 640,
-                height: 480,
-                up: up.normalize(),
-                elevation_deg: 0.0,
-                ..OrbitSpec::default()
-            },
-        ));
-    }
-    cams
-}
 
 /// The fit's views of the source and its renders of them: made once for every fit the encoder
 /// judges.

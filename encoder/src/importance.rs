@@ -10,32 +10,9 @@
 use dlgs::chunks::csog::QuantBits;
 use dlgs::Gaussians;
 use dlgs_render::contribution::contributions;
-use dlgs_render::{orbit_cameras, Camera, OrbitSpec};
-use glam::Vec3;
 
 use crate::grid_sort::{grid_order, permute, SortSpec};
-
-/// The views the importance is measured from: orbits around three orthogonal up axes (a scene's
-/// up is not known), six azimuths at 30 degrees above and below each orbit plane, 640x480.
-pub fn importance_views(g: &Gaussians) -> Vec<Camera> {
-    let mut cams = Vec::new();
-    for up in [Vec3::NEG_Y, Vec3::Z, Vec3::X] {
-        for elevation_deg in [-30.0, 30.0] {
-            cams.extend(orbit_cameras(
-                g,
-                &OrbitSpec {
-                    count: 6,
-                    width: 640,
-                    height: 480,
-                    up,
-                    elevation_deg,
-                    ..OrbitSpec::default()
-                },
-            ));
-        }
-    }
-    cams
-}
+pub use crate::judge_views::importance_views;
 
 /// Shaping weight per Gaussian from its summed blending weights (any non-negative unit).
 pub fn shaping_weights(blend: &[f64], tolerance: f64) -> Vec<f32> {

@@ -12,6 +12,7 @@ pub mod config;
 pub mod grid_sort;
 pub mod importance;
 pub mod invisible;
+pub mod judge_views;
 pub mod orientation;
 pub mod quality_search;
 mod refit_stage;

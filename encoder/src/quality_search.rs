@@ -20,6 +20,8 @@ use dlgs::container::{ChunkType, FileReader};
 use dlgs::{Gaussians, Limits, Result};
 use dlgs_render::{metrics, orbit_cameras, Camera, OrbitSpec};
 
+pub use crate::judge_views::search_views;
+use crate::judge_views::search_views_sized;
 use crate::{
     bit_allocation, importance, orientation, prepare_still, CanonicalCodec, EncoderConfig,
 };
@@ -133,33 +135,6 @@ pub const REFIT_TRIES: usize = 4;
 pub const REFINE_STARTS: usize = 2;
 /// ... add a bit to the group that buys the most PSNR per byte, at most this many times.
 pub const REFINE_STEPS: usize = 3;
-
-/// The cameras quality is measured from: orbits of 6 views at 5 and 35 degrees above the
-/// scene's -Y-up orbit plane, at `dlgs compare`'s default size (1352 x 1014). The size matters:
-/// the same position error covers more pixels in a larger image (real plant: 57.70 dB at 640 x
-/// 480, 56.66 dB at 1352 x 1014, same cameras and file).
-pub fn search_views(g: &Gaussians) -> Vec<Camera> {
-    let size = OrbitSpec::default();
-    search_views_sized(g, (size.width, size.height))
-}
-
-/// [`search_views`] at another image size (width, height).
-fn search_views_sized(g: &Gaussians, (width, height): (u32, u32)) -> Vec<Camera> {
-    let mut cams = Vec::new();
-    for elevation_deg in [5.0, 35.0] {
-        cams.extend(orbit_cameras(
-            g,
-            &OrbitSpec {
-                count: 6,
-                elevation_deg,
-                width,
-                height,
-                ..OrbitSpec::default()
-            },
-        ));
-    }
-    cams
-}
 
 /// Mean PSNR of `file` (a still scene the search wrote) against `g` from `dlgs compare`'s
 /// default cameras (8 orbit views at 20 degrees, [`OrbitSpec::default`]), uncapped as there:
