@@ -2,9 +2,10 @@
 # The GPL-free decoder seam (README "Licences"): dlgs-decoder and the C library built without
 # FFmpeg (cargo feature `hevc` off) link no libavcodec/libx265, decode exact-feature and still
 # files to the same floats as the full build, and report HEVC time features as a typed error.
-# Run after the workspace's release build (it compares with target/release/libdlgs_capi.so).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# The full library (with FFmpeg) to compare with: target/release/libdlgs_capi.so.
+cargo build --release -p dlgs-capi
 # A target directory of its own: the cdylib's file name does not change with its features.
 T=target/gpl-free
 cargo build --release -p dlgs-capi --no-default-features --target-dir "$T"
