@@ -15,8 +15,10 @@ if ldd "$lib" | grep -E "libavcodec|libavformat|libavutil|libx265|libswscale"; t
   exit 1
 fi
 echo "gpl_free: ldd $lib shows no FFmpeg/x265"
-# The decoder's own tests without the feature (the HEVC vector gives NoHevcDecoder).
+# The decoder's own tests without the feature (the HEVC vector gives NoHevcDecoder), and its
+# lints in that configuration.
 cargo test --release -p dlgs-decoder --no-default-features --lib
+cargo clippy --release -p dlgs-decoder --no-default-features --lib -- -D warnings
 # The C example player against both libraries: identical output on files needing no HEVC.
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Issue 5's side-by-side on a larger scene built from the real ones: the 272,920-Gaussian
 # scene of the renderer and decode benchmarks (the plant capture twice plus the donut PLY, side
-# by side; render/src/bench_scenes.rs). SPZ and SOG via splat-transform (scripts/peers.sh), then
+# by side; testkit/src/bench_scenes.rs). SPZ and SOG via splat-transform (scripts/peers.sh), then
 # the canonical_rd.sh rows (raw PLY, SPZ, SOG, dlgs) on it.
 # Usage: bash scripts/large_scene_rd.sh [OUT_DIR]  (default target/peers-large; ~3 min)
 # MOSAIC=1: the 209,435-Gaussian mosaic of every real scene once instead (bench_scenes::mosaic,

@@ -33,7 +33,7 @@ LD_PRELOAD="$out/libperturbed.so" "$conf" --skip committed_vectors_equal_what_th
   2>&1 | tail -n 3
 echo "libm_independence: every vector decodes to its checksums and frames with the perturbed libm"
 # musl's libm: the math functions of musl-dev's libc.a and what they need, as a shared object.
-musl_a=/usr/lib/x86_64-linux-musl/libc.a
+musl_a=/usr/lib/$(uname -m)-linux-musl/libc.a
 if [ ! -f "$musl_a" ]; then
   echo "libm_independence: $musl_a missing (apt-get install musl-dev)" >&2
   exit 1

@@ -9,10 +9,10 @@
 //!
 //! Accuracy: `ln` and `exp` are within about one binary64 ulp; the binary32 results the
 //! decoder uses are correctly rounded on every input the format produces where that is
-//! checkable (every opacity level of every bit width: `tests` below). `sin` and `acos` are
+//! checkable (every opacity level of every bit width: the test in `chunks/csog/quantiser.rs`). `sin` and `acos` are
 //! within a few binary64 ulps on the ranges the deformation uses.
 
-/// `ln 2` split so that `k * LN2_HI` is exact for `|k| < 2^20` (the low 32 bits are zero).
+/// `ln 2` split so that `k * LN2_HI` is exact for `|k| < 2^20` (32 significant bits).
 const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
 const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
 /// `π/2` split so that `k * PIO2_HI` is exact for `|k| < 2^20` (33 significant bits).

@@ -21,9 +21,9 @@ use dlgs_encoder::{
 pub struct CodecArgs {
     /// Canonical Gaussians: `lossless` (f32, CRAW) or sorted quantised grids (CSOG) at preset
     /// `near-lossless`, `high`, `medium` or `low` (bits per attribute in format-spec §6.5).
-    /// Default: `high` for a still scene (PLY, SPZ, .splat or SOG in: 54-55 dB against the
-    /// source at 56-79 % of PlayCanvas SOG's bytes on the real tiles in
-    /// docs/benchmarks/canonical.md), `lossless` when re-encoding a `.dlgs`, for `ingest` and
+    /// Default: `high` for a still scene (PLY, SPZ, .splat or SOG in: 41-68 dB against the
+    /// source on the real scenes of docs/benchmarks/canonical.md, 54-55 dB at 56-79 % of
+    /// PlayCanvas SOG's bytes on the four tiles), `lossless` when re-encoding a `.dlgs`, for `ingest` and
     /// for `synth` (the model's own values). `near-lossless` also stores the
     /// decoders in f16 (as `--mlp-f16`): on the reference-run fixture it renders at >= 64 dB
     /// against the lossless model (docs/benchmarks/ingest.md).

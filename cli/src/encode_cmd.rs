@@ -210,12 +210,16 @@ pub fn encode_file(
     residual_mode: Option<&str>,
     verbose: bool,
 ) -> Result<u32> {
-    let settings = codec.changed_settings();
+    let mut settings = codec.changed_settings();
     let pending = PendingFile::create(output)?;
     let mut out = pending.writer()?;
     if !is_dlgs(input) {
-        // A still scene is coded lossy unless asked otherwise (`--quality lossless`).
+        // A still scene is coded lossy unless asked otherwise (`--quality lossless`); META
+        // records the preset used either way.
         let codec = &codec.defaulting_quality("high");
+        if let (Some(q), serde_json::Value::Object(m)) = (&codec.quality, &mut settings) {
+            m.entry("quality").or_insert_with(|| q.clone().into());
+        }
         let g = dlgs::interop::read_splat_file(input)
             .with_context(|| format!("reading {}", input.display()))?;
         if let Some(target) = codec.target_psnr {

@@ -27,13 +27,7 @@ fn key_pictures(
     at: u64,
 ) -> Result<Vec<Vec<u16>>> {
     let hevc = hevc.ok_or_else(|| Error::new(ErrorKind::NoHevcDecoder, at))?;
-    hevc.decode(
-        packets,
-        tiling.width() as u32,
-        tiling.height() as u32,
-        expect,
-    )
-    .map_err(|reason| {
+    let bad = |reason: String| {
         Error::new(
             ErrorKind::Payload {
                 chunk: ChunkType::TFEA,
@@ -41,7 +35,35 @@ fn key_pictures(
             },
             at,
         )
-    })
+    };
+    let pictures = hevc
+        .decode(
+            packets,
+            tiling.width() as u32,
+            tiling.height() as u32,
+            expect,
+        )
+        .map_err(bad)?;
+    // A plugged-in decoder is not trusted: its pictures are checked before they are untiled.
+    let side = tiling.width() * tiling.height();
+    if pictures.len() != expect {
+        return Err(bad(format!(
+            "the HEVC decoder gave {} pictures, {expect} expected",
+            pictures.len()
+        )));
+    }
+    if let Some(p) = pictures.iter().find(|p| p.len() != side) {
+        return Err(bad(format!(
+            "the HEVC decoder gave a picture of {} samples, {side} expected",
+            p.len()
+        )));
+    }
+    if let Some(v) = pictures.iter().flatten().find(|&&v| v > 4095) {
+        return Err(bad(format!(
+            "the HEVC decoder gave sample {v}, above 12 bits"
+        )));
+    }
+    Ok(pictures)
 }
 
 /// Decode a GOP's canonical chunk, or apply its residual chunk to `base` (the reference GOP's

@@ -94,6 +94,36 @@ mod tests {
         assert_eq!(s.frame_at(0.0, &OPTS).unwrap().merged().len(), 1971);
     }
 
+    /// A plugged-in decoder that gives too few pictures, pictures of the wrong size or samples
+    /// above 12 bits makes the frame a `Payload` error of the `TFEA` chunk, not a panic.
+    #[test]
+    fn a_misbehaving_plugged_in_decoder_is_a_payload_error() {
+        use std::sync::Arc;
+
+        use super::KeyPictureDecoder;
+
+        /// (pictures less than asked, samples less than the picture, sample value)
+        struct Wrong(usize, usize, u16);
+        impl KeyPictureDecoder for Wrong {
+            fn decode(
+                &self,
+                _: &[&[u8]],
+                w: u32,
+                h: u32,
+                n: usize,
+            ) -> Result<Vec<Vec<u16>>, String> {
+                let side = (w * h) as usize - self.1;
+                Ok(vec![vec![self.2; side]; n - self.0])
+            }
+        }
+        for wrong in [Wrong(1, 0, 0), Wrong(0, 1, 0), Wrong(0, 0, 5000)] {
+            let mut d = open("lod3-dynamic-intra");
+            d.set_key_picture_decoder(Arc::new(wrong));
+            let e = d.frame_at(0.5, &OPTS).err().expect("refused");
+            assert!(matches!(e.kind, ErrorKind::Payload { .. }), "{e}");
+        }
+    }
+
     /// Without the feature, HEVC time features are a typed error naming what is missing.
     #[cfg(not(feature = "hevc"))]
     #[test]

@@ -189,7 +189,7 @@ impl Default for CanonicalSettings {
 }
 
 /// What lossy (`CSOG`) still scenes may change before and while coding. None of the first
-/// four changes a pixel; the others trade bytes for PSNR.
+/// three changes a pixel; the others trade bytes for PSNR.
 #[derive(Debug, Clone)]
 pub struct StillTools {
     /// Scenes without residual GOPs: store each static Gaussian with the rotation, among the

@@ -194,6 +194,7 @@ fn read_features(
     dir: &Path,
     rows: &[Row],
     n: usize,
+    limits: &Limits,
 ) -> Result<(TimeFeatures, FeatureSource), IngestError> {
     let path = dir.join("_point_feats.mp4");
     let what = path.display().to_string();
@@ -202,6 +203,9 @@ fn read_features(
             path,
             what: "the time-feature video".into(),
         });
+    }
+    if let Ok(m) = std::fs::metadata(&path) {
+        limits.check_alloc("reference run file size", m.len(), 0)?;
     }
     let row = csv::find(rows, "_point_feats")
         .and_then(|r| r.range)
@@ -339,7 +343,7 @@ pub fn read_first(dir: &Path, limits: &Limits) -> Result<RefGop, IngestError> {
         read_set(dir, &rows, "_dynamic", limits)?.gaussians(&dir.display().to_string(), limits)?;
     check_sets(&statics, &dynamics, &dir.display().to_string())?;
     let language = statics.lang_width > 0;
-    let (features, feature_source) = read_features(dir, &rows, dynamics.len())?;
+    let (features, feature_source) = read_features(dir, &rows, dynamics.len(), limits)?;
     Ok(RefGop {
         dir: dir.to_path_buf(),
         mlps: read_mlps(dir, language, false, limits)?,
@@ -474,7 +478,7 @@ pub fn read_next(dir: &Path, prev: &RefGop, limits: &Limits) -> Result<RefGop, I
         check_finite(&dir.display().to_string(), &set.sh)?;
     }
     let language = statics.lang_width > 0;
-    let (features, feature_source) = read_features(dir, &rows, dynamics.len())?;
+    let (features, feature_source) = read_features(dir, &rows, dynamics.len(), limits)?;
     Ok(RefGop {
         dir: dir.to_path_buf(),
         mlps: read_mlps(dir, language, true, limits)?,
