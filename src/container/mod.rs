@@ -2,7 +2,7 @@
 //! Byte-level description: format-spec/dlgs.md §2-§5.
 
 pub mod chunk;
-pub mod chunk_type;
+pub(crate) mod chunk_type;
 pub mod gop;
 pub mod header;
 pub mod reader;

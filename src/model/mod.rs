@@ -4,7 +4,7 @@ pub mod dynamic;
 pub mod gaussians;
 pub mod lang_decoder;
 pub mod ntc;
-pub mod ntc_config;
+mod ntc_config;
 mod ntc_lanes;
 pub mod residual;
 
