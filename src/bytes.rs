@@ -1,7 +1,7 @@
 //! A bounds-checked little-endian cursor over a byte slice. Every read that would pass the end
 //! returns `Truncated` with the absolute file offset instead of panicking.
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 
 pub struct ByteReader<'a> {
     data: &'a [u8],
@@ -20,12 +20,12 @@ impl<'a> ByteReader<'a> {
     pub fn remaining(&self) -> usize {
         self.data.len() - self.pos
     }
-    pub fn err(&self, kind: ErrorKind) -> Error {
-        Error::new(kind, self.offset())
+    pub fn err(&self, kind: FormatErrorKind) -> Error {
+        Error::format(kind, self.offset())
     }
     pub fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8]> {
         if n > self.remaining() {
-            return Err(self.err(ErrorKind::Truncated {
+            return Err(self.err(FormatErrorKind::Truncated {
                 what,
                 needed: n as u64,
                 available: self.remaining() as u64,
@@ -65,7 +65,10 @@ impl<'a> ByteReader<'a> {
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(Error::new(ErrorKind::NonFinite { field: what }, at))
+            Err(Error::format(
+                FormatErrorKind::NonFinite { field: what },
+                at,
+            ))
         }
     }
     /// An unsigned LEB128 varint of at most 5 bytes whose value fits a u32 (7 bits per byte,
@@ -78,8 +81,8 @@ impl<'a> ByteReader<'a> {
             v |= ((b & 0x7f) as u64) << (7 * i);
             if b & 0x80 == 0 {
                 return u32::try_from(v).map_err(|_| {
-                    Error::new(
-                        ErrorKind::InvalidField {
+                    Error::format(
+                        FormatErrorKind::InvalidField {
                             field: what,
                             value: v,
                             reason: "varint above u32",
@@ -89,8 +92,8 @@ impl<'a> ByteReader<'a> {
                 });
             }
         }
-        Err(Error::new(
-            ErrorKind::InvalidField {
+        Err(Error::format(
+            FormatErrorKind::InvalidField {
                 field: what,
                 value: v,
                 reason: "varint longer than 5 bytes",
@@ -105,13 +108,16 @@ impl<'a> ByteReader<'a> {
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(Error::new(ErrorKind::NonFinite { field: what }, at))
+            Err(Error::format(
+                FormatErrorKind::NonFinite { field: what },
+                at,
+            ))
         }
     }
     /// `n` little-endian f32 values; the length is checked before allocating.
     pub fn f32_vec(&mut self, n: usize, what: &'static str) -> Result<Vec<f32>> {
         let bytes = n.checked_mul(4).ok_or_else(|| {
-            self.err(ErrorKind::InvalidField {
+            self.err(FormatErrorKind::InvalidField {
                 field: what,
                 value: n as u64,
                 reason: "count overflows",
@@ -170,22 +176,20 @@ impl PutLe for Vec<u8> {
 /// Compress `data` as one zstd frame at `level` (zstd clamps the level to its range); a
 /// failure of the library is reported as `InvalidInput`, the same in every chunk.
 pub fn zstd_compress(data: &[u8], level: i32) -> Result<Vec<u8>> {
-    zstd::bulk::compress(data, level).map_err(|e| {
-        Error::new(
-            ErrorKind::InvalidInput(format!("zstd level {level}: {e}")),
-            0,
-        )
-    })
+    zstd::bulk::compress(data, level).map_err(|e| Error::input(format!("zstd level {level}: {e}")))
 }
 
 /// Decompress one zstd frame that must yield exactly `len` bytes (never more is allocated);
 /// anything else is `Decompress` at `at`. Check `len` against the limits first.
 pub fn zstd_exact(data: &[u8], len: u64, at: u64) -> Result<Vec<u8>> {
     let out = zstd::bulk::decompress(data, len as usize)
-        .map_err(|e| Error::new(ErrorKind::Decompress(e.to_string()), at))?;
+        .map_err(|e| Error::format(FormatErrorKind::Decompress(e.to_string()), at))?;
     if out.len() as u64 != len {
-        return Err(Error::new(
-            ErrorKind::Decompress(format!("{} bytes decompressed, {len} declared", out.len())),
+        return Err(Error::format(
+            FormatErrorKind::Decompress(format!(
+                "{} bytes decompressed, {len} declared",
+                out.len()
+            )),
             at,
         ));
     }

@@ -20,6 +20,8 @@ pub mod model;
 mod task_queue;
 
 pub use container::{ChunkType, FileReader, SceneHeader, StreamReader, Writer};
-pub use error::{Error, ErrorKind, Result};
+pub use error::{
+    Error, FormatError, FormatErrorKind, InputError, IoError, LimitError, RequestError, Result,
+};
 pub use limits::Limits;
 pub use model::{Canonical, Gaussians};

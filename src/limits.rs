@@ -35,14 +35,7 @@ impl Limits {
     /// `LimitExceeded` at `at` if a buffer of `bytes` would pass `max_alloc`.
     pub fn check_alloc(&self, what: &'static str, bytes: u64, at: u64) -> crate::Result<()> {
         if bytes > self.max_alloc {
-            return Err(crate::Error::new(
-                crate::ErrorKind::LimitExceeded {
-                    what,
-                    value: bytes,
-                    limit: self.max_alloc,
-                },
-                at,
-            ));
+            return Err(crate::Error::limit(what, bytes, self.max_alloc, at));
         }
         Ok(())
     }
@@ -50,14 +43,7 @@ impl Limits {
     /// `LimitExceeded` at `at` if `count` Gaussians would pass `max_gaussians`.
     pub fn check_gaussians(&self, what: &'static str, count: u64, at: u64) -> crate::Result<()> {
         if count > self.max_gaussians {
-            return Err(crate::Error::new(
-                crate::ErrorKind::LimitExceeded {
-                    what,
-                    value: count,
-                    limit: self.max_gaussians,
-                },
-                at,
-            ));
+            return Err(crate::Error::limit(what, count, self.max_gaussians, at));
         }
         Ok(())
     }

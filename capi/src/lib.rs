@@ -115,9 +115,9 @@ fn fail(status: DlgsStatus, msg: impl Into<String>) -> DlgsStatus {
 }
 
 fn format_error(e: dlgs::Error) -> DlgsStatus {
-    let status = match e.kind {
-        dlgs::ErrorKind::Io { .. } => DlgsStatus::Io,
-        dlgs::ErrorKind::NoHevcDecoder => DlgsStatus::NoHevcDecoder,
+    let status = match e {
+        dlgs::Error::Io(_) => DlgsStatus::Io,
+        dlgs::Error::NoHevcDecoder => DlgsStatus::NoHevcDecoder,
         _ => DlgsStatus::Format,
     };
     fail(status, e.to_string())

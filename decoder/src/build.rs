@@ -7,7 +7,7 @@ use dlgs::chunks::tfea::{self, TfeaBody, Tiling};
 use dlgs::chunks::{decode_canonical, decode_residual, mlpw, CANONICAL_CHUNKS, RESIDUAL_CHUNKS};
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader};
 use dlgs::model::DeformMlps;
-use dlgs::{Error, ErrorKind, Limits, Result};
+use dlgs::{Error, FormatErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
 use crate::planar::{KeySource, PlanarFeatures};
@@ -26,16 +26,8 @@ fn key_pictures(
     expect: usize,
     at: u64,
 ) -> Result<Vec<Vec<u16>>> {
-    let hevc = hevc.ok_or_else(|| Error::new(ErrorKind::NoHevcDecoder, at))?;
-    let bad = |reason: String| {
-        Error::new(
-            ErrorKind::Payload {
-                chunk: ChunkType::TFEA,
-                reason,
-            },
-            at,
-        )
-    };
+    let hevc = hevc.ok_or(Error::NoHevcDecoder)?;
+    let bad = |reason: String| Error::payload(ChunkType::TFEA, reason, at);
     let pictures = hevc
         .decode(
             packets,
@@ -80,13 +72,13 @@ pub(crate) fn state(
     let (canon, residual) = (find_any(&CANONICAL_CHUNKS), find_any(&RESIDUAL_CHUNKS));
     let Some(base) = base else {
         if let Some(c) = residual {
-            return Err(Error::new(
-                ErrorKind::Order("a residual chunk in a GOP without a reference GOP"),
+            return Err(Error::format(
+                FormatErrorKind::Order("a residual chunk in a GOP without a reference GOP"),
                 c.offset,
             ));
         }
-        let c =
-            canon.ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
+        let c = canon
+            .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
         let p = payload(&c)?;
         let canonical = decode_canonical(c.ty, &p, c.payload_offset(), scene, limits)
             .expect("a canonical chunk type")?;
@@ -97,12 +89,13 @@ pub(crate) fn state(
         });
     };
     if let Some(c) = canon {
-        return Err(Error::new(
-            ErrorKind::Order("a canonical chunk in a GOP that has a reference GOP"),
+        return Err(Error::format(
+            FormatErrorKind::Order("a canonical chunk in a GOP that has a reference GOP"),
             c.offset,
         ));
     }
-    let c = residual.ok_or_else(|| Error::new(ErrorKind::MissingChunk(ChunkType::RDLT), gop_at))?;
+    let c = residual
+        .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ChunkType::RDLT), gop_at))?;
     let p = payload(&c)?;
     let (canonical, ntc) =
         decode_residual(c.ty, &p, c.payload_offset(), scene, limits, &base.canonical)
@@ -131,7 +124,8 @@ pub(crate) fn dynamic_payloads(
         return Ok(None);
     }
     let mut read = |ty: ChunkType| -> Result<(Vec<u8>, u64)> {
-        let c = find(chunks, ty).ok_or_else(|| Error::new(ErrorKind::MissingChunk(ty), gop_at))?;
+        let c = find(chunks, ty)
+            .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), gop_at))?;
         Ok((payload(&c)?, c.payload_offset()))
     };
     Ok(Some(DynamicPayloads {

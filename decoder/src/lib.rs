@@ -23,7 +23,7 @@ use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
-use dlgs::{Canonical, Error, ErrorKind, Limits, Result};
+use dlgs::{Canonical, Error, FormatErrorKind, Limits, Result};
 
 pub use deform::{Deformer, FrameOptions};
 pub use hevc::{KeyPictureDecoder, SharedKeyPictureDecoder};
@@ -253,8 +253,8 @@ impl<R: Read + Seek> Decoder<R> {
                 break;
             }
             if chain.len() > self.scene().gop_count as usize {
-                return Err(Error::new(
-                    ErrorKind::Index("reference GOPs form a cycle"),
+                return Err(Error::format(
+                    FormatErrorKind::Index("reference GOPs form a cycle"),
                     self.reader.gop_entry(g)?.offset,
                 ));
             }

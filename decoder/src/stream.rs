@@ -11,7 +11,7 @@ use dlgs::chunks::laed;
 use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader, StreamEvent, StreamReader};
 use dlgs::model::lang_decoder::LangDecoder;
-use dlgs::{Error, ErrorKind, Limits, Result};
+use dlgs::{Error, FormatErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
 use crate::{build, DecodedGop, State};
@@ -112,14 +112,14 @@ impl<R: Read> StreamDecoder<R> {
                 }
                 Some(StreamEvent::End(_)) | None => return self.finish(),
                 Some(StreamEvent::SceneChunk(c, _)) => {
-                    return Err(Error::new(
-                        ErrorKind::Order("a scene-level chunk after the first GOP"),
+                    return Err(Error::format(
+                        FormatErrorKind::Order("a scene-level chunk after the first GOP"),
                         c.offset,
                     ))
                 }
                 Some(StreamEvent::GopChunk(c, _)) => {
-                    return Err(Error::new(
-                        ErrorKind::Order("a GOP chunk before any GOPH"),
+                    return Err(Error::format(
+                        FormatErrorKind::Order("a GOP chunk before any GOPH"),
                         c.offset,
                     ))
                 }
@@ -146,8 +146,8 @@ impl<R: Read> StreamDecoder<R> {
             r => match &self.last {
                 Some((lg, s)) if *lg == r => Some(s),
                 _ => {
-                    return Err(Error::new(
-                        ErrorKind::Index(
+                    return Err(Error::format(
+                        FormatErrorKind::Index(
                             "a streamed GOP may only reference GOP 0 or the GOP before it",
                         ),
                         gop_at,
@@ -163,7 +163,7 @@ impl<R: Read> StreamDecoder<R> {
                 .iter_mut()
                 .find(|(i, _)| i.offset == c.offset)
                 .map(|(_, p)| std::mem::take(p))
-                .ok_or_else(|| Error::new(ErrorKind::MissingChunk(c.ty), c.offset))
+                .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(c.ty), c.offset))
         };
         let state = build::state(&scene, &self.limits, &infos, gop_at, base, &mut payload)?;
         if g == 0 {

@@ -100,9 +100,7 @@ pub(crate) fn render_views(g: &Gaussians, cams: &[Camera]) -> Result<Vec<Vec<f32
         .map(|cam| {
             render(g, cam, &RenderOptions::default())
                 .map(|img| img.color)
-                .map_err(|e| {
-                    dlgs::Error::new(dlgs::ErrorKind::InvalidInput(format!("rendering: {e}")), 0)
-                })
+                .map_err(|e| dlgs::Error::input(format!("rendering: {e}")))
         })
         .collect()
 }

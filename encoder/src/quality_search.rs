@@ -555,9 +555,8 @@ fn decode_still(file: &[u8]) -> Result<Gaussians> {
     let scene = r.scene().clone();
     let chunks = r.gop_chunks(0)?;
     let Some(info) = chunks.iter().find(|c| c.ty == ChunkType::CSOG) else {
-        return Err(dlgs::Error::new(
-            dlgs::ErrorKind::InvalidInput("quality search: the candidate holds no CSOG".into()),
-            0,
+        return Err(dlgs::Error::input(
+            "quality search: the candidate holds no CSOG",
         ));
     };
     let payload = r.payload(info)?;

@@ -16,7 +16,7 @@ use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
 use dlgs::model::residual::DeltaResidual;
 use dlgs::model::DynamicGop;
-use dlgs::{Canonical, Error, ErrorKind, Result};
+use dlgs::{Canonical, Error, Result};
 
 use crate::refit_stage::{self, RefitReport};
 use crate::{bit_allocation, grid_sort, importance, orientation};
@@ -42,29 +42,21 @@ impl<W: Write> StreamEncoder<W> {
     pub fn new(out: W, scene: SceneHeader, cfg: EncoderConfig) -> Result<Self> {
         let mut writer = Writer::new(out, scene)?;
         if let Some(meta) = &cfg.container.meta {
-            let bytes = serde_json::to_vec(meta)
-                .map_err(|e| Error::new(ErrorKind::InvalidInput(e.to_string()), 0))?;
+            let bytes = serde_json::to_vec(meta).map_err(|e| Error::input(e.to_string()))?;
             writer.scene_chunk(ChunkType::META, 0, &bytes)?;
         }
         if let Some(d) = &cfg.language.decoder {
             if writer.scene().lang_levels == 0 {
-                return Err(Error::new(
-                    ErrorKind::InvalidInput(
-                        "a language decoder was given but the scene has no language features"
-                            .into(),
-                    ),
-                    0,
+                return Err(Error::input(
+                    "a language decoder was given but the scene has no language features",
                 ));
             }
             if d.input_dims() != writer.scene().lang_dims as usize {
-                return Err(Error::new(
-                    ErrorKind::InvalidInput(format!(
-                        "the language decoder takes {} dims, the scene has {} per level",
-                        d.input_dims(),
-                        writer.scene().lang_dims
-                    )),
-                    0,
-                ));
+                return Err(Error::input(format!(
+                    "the language decoder takes {} dims, the scene has {} per level",
+                    d.input_dims(),
+                    writer.scene().lang_dims
+                )));
             }
             let bytes = laed::encode(d, cfg.language.weights, 19)?;
             writer.scene_chunk(ChunkType::LAED, 0, &bytes)?;
@@ -114,13 +106,13 @@ impl<W: Write> StreamEncoder<W> {
             (false, None) => None,
             (true, Some(d)) => Some(self.dynamic_payloads(d, coded)?),
             (true, None) => {
-                return Err(invalid(
-                    "the scene has dynamic Gaussians but the GOP has no deformation field".into(),
+                return Err(Error::input(
+                    "the scene has dynamic Gaussians but the GOP has no deformation field",
                 ))
             }
             (false, Some(_)) => {
-                return Err(invalid(
-                    "a deformation field for a scene without dynamic Gaussians".into(),
+                return Err(Error::input(
+                    "a deformation field for a scene without dynamic Gaussians",
                 ))
             }
         };
@@ -129,7 +121,7 @@ impl<W: Write> StreamEncoder<W> {
         let tracks_state = s.residual_mode != dlgs::container::header::ResidualMode::Intra;
         let (ty, payload, decoded) = if reference == NO_REFERENCE {
             let GopCanonical::State(canon) = canonical else {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "GOP {g} has no reference GOP: it needs a full canonical state, not a residual"
                 )));
             };
@@ -336,7 +328,7 @@ impl<W: Write> StreamEncoder<W> {
             || f.channels != s.time_channels as usize
             || f.data.len() != f.n * f.keys * f.channels
         {
-            return Err(invalid(format!(
+            return Err(Error::input(format!(
                 "time features ({}, {}, {}) do not match the scene ({}, {}, {})",
                 f.n,
                 f.keys,
@@ -347,7 +339,9 @@ impl<W: Write> StreamEncoder<W> {
             )));
         }
         dlgs::model::dynamic::check_finite("time features", &f.data)?;
-        d.mlps.validate(s, 0).map_err(|e| invalid(e.to_string()))?;
+        d.mlps
+            .validate(s, 0)
+            .map_err(|e| Error::input(e.to_string()))?;
         let body = match (&self.cfg.dynamic.features, coded) {
             (_, Some(c)) => c.clone(),
             (FeatureCodec::Exact, None) => TfeaBody::Exact(f.clone()),
@@ -360,7 +354,7 @@ impl<W: Write> StreamEncoder<W> {
                     frames: tfea::tile(f, &tiling, &ranges),
                 };
                 let packets = dlgs_video::encode_gray12(&video, settings)
-                    .map_err(|e| invalid(format!("time-feature video: {e}")))?;
+                    .map_err(|e| Error::input(format!("time-feature video: {e}")))?;
                 TfeaBody::Hevc {
                     tiling,
                     ranges,
@@ -400,7 +394,7 @@ impl<W: Write> StreamEncoder<W> {
 
 fn check_layout(canon: &Canonical, s: &SceneHeader) -> Result<()> {
     if canon.statics.len() != s.n_static as usize || canon.dynamics.len() != s.n_dynamic as usize {
-        return Err(invalid(format!(
+        return Err(Error::input(format!(
             "GOP has {}/{} static/dynamic Gaussians, header declares {}/{}",
             canon.statics.len(),
             canon.dynamics.len(),
@@ -409,13 +403,9 @@ fn check_layout(canon: &Canonical, s: &SceneHeader) -> Result<()> {
         )));
     }
     if canon.statics.sh_degree != s.sh_degree || canon.statics.lang_width != s.lang_width() {
-        return Err(invalid(
-            "GOP layout differs from the header (SH degree or language width)".into(),
+        return Err(Error::input(
+            "GOP layout differs from the header (SH degree or language width)",
         ));
     }
     Ok(())
-}
-
-fn invalid(msg: String) -> Error {
-    Error::new(ErrorKind::InvalidInput(msg), 0)
 }

@@ -3,7 +3,7 @@
 
 use crate::bytes::{ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::{sh_coeffs, Canonical, Gaussians};
 
@@ -54,11 +54,8 @@ pub fn encode(c: &Canonical, codec: RawCodec, zstd_level: i32) -> Result<Vec<u8>
     c.dynamics.check_shapes()?;
     if c.statics.sh_degree != c.dynamics.sh_degree || c.statics.lang_width != c.dynamics.lang_width
     {
-        return Err(Error::new(
-            ErrorKind::InvalidInput(
-                "static and dynamic sets must share SH degree and language width".into(),
-            ),
-            0,
+        return Err(Error::input(
+            "static and dynamic sets must share SH degree and language width",
         ));
     }
     c.statics.check_finite()?;
@@ -108,15 +105,7 @@ fn read_set(r: &mut ByteReader, n: usize, sh_degree: u8, lw: usize) -> Result<Ga
 /// Decode a `CRAW` payload that starts at absolute `offset`, checking it against the scene.
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<Canonical> {
     let mut r = ByteReader::new(p, offset);
-    let bad = |reason: String, at: u64| {
-        Error::new(
-            ErrorKind::Payload {
-                chunk: ChunkType::CRAW,
-                reason,
-            },
-            at,
-        )
-    };
+    let bad = |reason: String, at: u64| Error::payload(ChunkType::CRAW, reason, at);
     let at = r.offset();
     let sh_degree = r.u8("CRAW sh_degree")?;
     let lw = r.u8("CRAW lang_width")? as usize;

@@ -3,22 +3,12 @@
 use crate::bytes::{zstd_exact, ByteReader, PutLe};
 use crate::chunks::mlpw::{WeightType, MAX_LAYERS, MAX_WIDTH};
 use crate::container::{ChunkType, SceneHeader};
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 use crate::model::lang_decoder::{DenseLayer, LangDecoder, NamedEmbedding};
 use crate::Limits;
 
 /// Most negatives a reader accepts.
 pub const MAX_NEGATIVES: usize = 64;
-
-fn bad(reason: String, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::LAED,
-            reason,
-        },
-        at,
-    )
-}
 
 /// Serialise a decoder. Rejects invalid shapes, NaN/Inf and f16 overflow.
 pub fn encode(d: &LangDecoder, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>> {
@@ -28,14 +18,11 @@ pub fn encode(d: &LangDecoder, ty: WeightType, zstd_level: i32) -> Result<Vec<u8
         || widths.iter().any(|&w| w > MAX_WIDTH)
         || d.negatives.len() > MAX_NEGATIVES
     {
-        return Err(Error::new(
-            ErrorKind::InvalidInput(format!(
+        return Err(Error::input(format!(
                 "language decoder outside the format's limits ({} layers <= {MAX_LAYERS}, widths <= {MAX_WIDTH}, {} negatives <= {MAX_NEGATIVES})",
                 d.layers.len(),
                 d.negatives.len()
-            )),
-            0,
-        ));
+            )));
     }
     let mut b = Vec::new();
     b.put_u8(ty as u8);
@@ -73,15 +60,26 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let ty = match r.u8("LAED weight type")? {
         0 => WeightType::F32,
         1 => WeightType::F16,
-        v => return Err(bad(format!("unknown weight type {v}"), at)),
+        v => {
+            return Err(Error::payload(
+                ChunkType::LAED,
+                format!("unknown weight type {v}"),
+                at,
+            ))
+        }
     };
     let layers = r.u8("LAED layer count")? as usize;
     if layers == 0 || layers > MAX_LAYERS {
-        return Err(bad(format!("{layers} layers (1..={MAX_LAYERS})"), at + 1));
+        return Err(Error::payload(
+            ChunkType::LAED,
+            format!("{layers} layers (1..={MAX_LAYERS})"),
+            at + 1,
+        ));
     }
     let negatives = r.u8("LAED negative count")? as usize;
     if negatives > MAX_NEGATIVES {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::LAED,
             format!("{negatives} negatives (0..={MAX_NEGATIVES})"),
             at + 2,
         ));
@@ -91,7 +89,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     for _ in 0..=layers {
         let w = r.u16("LAED width")? as usize;
         if w == 0 || w > MAX_WIDTH {
-            return Err(bad(
+            return Err(Error::payload(
+                ChunkType::LAED,
                 format!("layer width {w} (1..={MAX_WIDTH})"),
                 r.offset() - 2,
             ));
@@ -99,10 +98,15 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         widths.push(w);
     }
     if scene.lang_levels == 0 {
-        return Err(bad("the scene has no language features".into(), at));
+        return Err(Error::payload(
+            ChunkType::LAED,
+            "the scene has no language features",
+            at,
+        ));
     }
     if widths[0] != scene.lang_dims as usize {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::LAED,
             format!(
                 "decoder input width {} but the scene has {} dims per language level",
                 widths[0], scene.lang_dims
@@ -116,7 +120,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         let name_at = r.offset();
         let bytes = r.take(len, "LAED negative name")?;
         let name = std::str::from_utf8(bytes)
-            .map_err(|_| bad("negative name is not UTF-8".into(), name_at))?;
+            .map_err(|_| Error::payload(ChunkType::LAED, "negative name is not UTF-8", name_at))?;
         names.push(name.to_string());
     }
     let embed = *widths.last().unwrap_or(&0) as u64;
@@ -129,7 +133,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let raw_at = r.offset();
     let raw_len = r.u32("LAED value bytes")? as u64;
     if raw_len != values * size {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::LAED,
             format!(
                 "{raw_len} value bytes declared, shapes need {}",
                 values * size
@@ -146,8 +151,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         if v.iter().all(|x| x.is_finite()) {
             Ok(v)
         } else {
-            Err(Error::new(
-                ErrorKind::NonFinite {
+            Err(Error::format(
+                FormatErrorKind::NonFinite {
                     field: "LAED value",
                 },
                 body_at,
@@ -169,7 +174,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     for name in names {
         let values = take(embed as usize)?;
         if values.iter().all(|&v| v == 0.0) {
-            return Err(bad(
+            return Err(Error::payload(
+                ChunkType::LAED,
                 format!("negative '{name}' is the zero vector"),
                 body_at,
             ));

@@ -3,7 +3,7 @@
 
 use crate::bytes::{zstd_exact, ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 use crate::model::dynamic::check_finite;
 use crate::model::{DeformMlps, Layer, Mlp, MlpRole};
 use crate::Limits;
@@ -35,10 +35,7 @@ impl WeightType {
             WeightType::F16 => {
                 let h = half::f16::from_f32(v);
                 if !h.is_finite() {
-                    return Err(Error::new(
-                        ErrorKind::InvalidInput(format!("{what} {v} overflows f16")),
-                        0,
-                    ));
+                    return Err(Error::input(format!("{what} {v} overflows f16")));
                 }
                 out.put_u16(h.to_bits());
             }
@@ -91,16 +88,6 @@ pub fn encode(m: &DeformMlps, ty: WeightType, zstd_level: i32) -> Result<Vec<u8>
     Ok(b)
 }
 
-fn bad(reason: String, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::MLPW,
-            reason,
-        },
-        at,
-    )
-}
-
 /// Parse an `MLPW` payload at absolute `offset` and check it against the scene (§6.3).
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<DeformMlps> {
     let mut r = ByteReader::new(p, offset);
@@ -108,33 +95,53 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let ty = match r.u8("MLPW weight type")? {
         0 => WeightType::F32,
         1 => WeightType::F16,
-        v => return Err(bad(format!("unknown weight type {v}"), at)),
+        v => {
+            return Err(Error::payload(
+                ChunkType::MLPW,
+                format!("unknown weight type {v}"),
+                at,
+            ))
+        }
     };
     let flags = r.u8("MLPW flags")?;
     let at_count = r.offset();
     let count = r.u8("MLPW count")? as usize;
     r.u8("MLPW reserved")?;
     if count == 0 || count > MlpRole::ALL.len() {
-        return Err(bad(format!("{count} MLPs (1..=5 allowed)"), at_count));
+        return Err(Error::payload(
+            ChunkType::MLPW,
+            format!("{count} MLPs (1..=5 allowed)"),
+            at_count,
+        ));
     }
     let mut shapes: Vec<(MlpRole, Vec<usize>, u64)> = Vec::with_capacity(count);
     let mut total: u64 = 0;
     for _ in 0..count {
         let at = r.offset();
         let role = r.u8("MLPW role")?;
-        let role = MlpRole::from_u8(role).ok_or_else(|| bad(format!("unknown role {role}"), at))?;
+        let role = MlpRole::from_u8(role)
+            .ok_or_else(|| Error::payload(ChunkType::MLPW, format!("unknown role {role}"), at))?;
         if shapes.iter().any(|s| s.0 == role) {
-            return Err(bad(format!("{} MLP given twice", role.name()), at));
+            return Err(Error::payload(
+                ChunkType::MLPW,
+                format!("{} MLP given twice", role.name()),
+                at,
+            ));
         }
         let layers = r.u8("MLPW layer count")? as usize;
         if layers == 0 || layers > MAX_LAYERS {
-            return Err(bad(format!("{layers} layers (1..={MAX_LAYERS})"), at + 1));
+            return Err(Error::payload(
+                ChunkType::MLPW,
+                format!("{layers} layers (1..={MAX_LAYERS})"),
+                at + 1,
+            ));
         }
         let mut widths = Vec::with_capacity(layers + 1);
         for _ in 0..=layers {
             let w = r.u16("MLPW width")? as usize;
             if w == 0 || w > MAX_WIDTH {
-                return Err(bad(
+                return Err(Error::payload(
+                    ChunkType::MLPW,
                     format!("layer width {w} (1..={MAX_WIDTH})"),
                     r.offset() - 2,
                 ));
@@ -147,7 +154,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let raw_at = r.offset();
     let raw_len = r.u32("MLPW weight bytes")? as u64;
     if raw_len != total * ty.size() as u64 {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::MLPW,
             format!(
                 "{raw_len} weight bytes declared, shapes need {}",
                 total * ty.size() as u64
@@ -165,8 +173,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         for w in widths.windows(2) {
             let weights: Vec<f32> = values.by_ref().take(w[0] * w[1]).collect();
             if weights.iter().any(|x| !x.is_finite()) {
-                return Err(Error::new(
-                    ErrorKind::NonFinite {
+                return Err(Error::format(
+                    FormatErrorKind::NonFinite {
                         field: "MLPW weight",
                     },
                     at,
@@ -181,7 +189,13 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         slots[role as usize] = Some(Mlp { role, layers });
     }
     let [deform, cov, opacity, color, lang] = slots;
-    let missing = |r: MlpRole| bad(format!("{} MLP missing", r.name()), at_count);
+    let missing = |r: MlpRole| {
+        Error::payload(
+            ChunkType::MLPW,
+            format!("{} MLP missing", r.name()),
+            at_count,
+        )
+    };
     let m = DeformMlps {
         deform: deform.ok_or_else(|| missing(MlpRole::Deform))?,
         cov: cov.ok_or_else(|| missing(MlpRole::Cov))?,

@@ -35,6 +35,7 @@ pub fn decode_canonical(
         ChunkType::CSOG => Some(csog::decode(p, offset, scene, limits)),
         _ => None,
     }
+    .map(|r| r.map_err(|e| e.in_chunk(ty)))
 }
 
 /// Decode a residual chunk (`RNTC` §6.6 or `RDLT` §6.7) whose payload starts at `offset` and
@@ -51,9 +52,11 @@ pub fn decode_residual(
     match ty {
         ChunkType::RNTC => Some((|| {
             let field = rntc::decode(p, offset, scene, limits)?;
-            let next = field
-                .apply(base)
-                .map_err(|e| crate::Error::new(e.kind, offset))?;
+            let next = field.apply(base).map_err(|e| match e {
+                // The residual names groups or sets the scene lacks: the file is at fault.
+                crate::Error::Input(i) => crate::Error::payload(ty, i.message, offset),
+                e => e,
+            })?;
             Ok((next, Some(field)))
         })()),
         ChunkType::RDLT => {
@@ -61,4 +64,5 @@ pub fn decode_residual(
         }
         _ => None,
     }
+    .map(|r| r.map_err(|e| e.in_chunk(ty)))
 }

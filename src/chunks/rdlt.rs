@@ -6,7 +6,7 @@ use crate::bytes::{ByteReader, PutLe};
 use crate::chunks::csog::grid_coder::{self, GridCodec};
 use crate::chunks::csog::grid_width;
 use crate::container::{ChunkType, SceneHeader};
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 use crate::model::residual::{AttrGroup, DeltaGroup, DeltaMode, DeltaResidual};
 
@@ -60,13 +60,10 @@ pub fn encode(d: &DeltaResidual, scene: &SceneHeader, zstd_level: i32) -> Result
             || g.dynamics.len() != counts[1] * w
             || d.groups.iter().filter(|h| h.group == g.group).count() > 1
         {
-            return Err(Error::new(
-                ErrorKind::InvalidInput(format!(
-                    "RDLT group {} does not match the scene",
-                    g.group.name()
-                )),
-                0,
-            ));
+            return Err(Error::input(format!(
+                "RDLT group {} does not match the scene",
+                g.group.name()
+            )));
         }
         out.put_u8(g.group as u8);
         let (mode, step, bound) = match g.mode {
@@ -93,16 +90,6 @@ pub fn encode(d: &DeltaResidual, scene: &SceneHeader, zstd_level: i32) -> Result
     Ok(out)
 }
 
-fn bad(reason: String, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::RDLT,
-            reason,
-        },
-        at,
-    )
-}
-
 fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i32>> {
     let at = r.offset();
     let kmin = r.u32("RDLT channel minimum")? as i32;
@@ -117,7 +104,11 @@ fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i
     let from = |u: u32| (kmin as i64 + u as i64) as i32;
     if codec == WIDE {
         if bits != 32 {
-            return Err(bad(format!("wide channel with {bits} bits"), at));
+            return Err(Error::payload(
+                ChunkType::RDLT,
+                format!("wide channel with {bits} bits"),
+                at,
+            ));
         }
         let raw = crate::bytes::zstd_exact(data, n as u64 * 4, data_at)?;
         return Ok((0..n)
@@ -134,9 +125,19 @@ fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i
     // RDLT channels use codecs 0-2 only (3 is its own wide codec, above).
     let codec = GridCodec::from_u8(codec)
         .filter(|c| (*c as u8) <= GridCodec::Predictive as u8)
-        .ok_or_else(|| bad(format!("unknown channel codec {codec}"), at))?;
+        .ok_or_else(|| {
+            Error::payload(
+                ChunkType::RDLT,
+                format!("unknown channel codec {codec}"),
+                at,
+            )
+        })?;
     if !(1..=16).contains(&bits) {
-        return Err(bad(format!("{bits}-bit channel (1..=16)"), at));
+        return Err(Error::payload(
+            ChunkType::RDLT,
+            format!("{bits}-bit channel (1..=16)"),
+            at,
+        ));
     }
     let q = grid_coder::decode(
         codec,
@@ -147,9 +148,14 @@ fn decode_channel(r: &mut ByteReader, n: usize, limits: &Limits) -> Result<Vec<i
         None,
         None,
     )
-    .map_err(|e| match e.kind {
-        ErrorKind::Payload { reason, .. } => bad(reason, e.offset),
-        _ => e,
+    .map_err(|e| match e {
+        // The shared grid coder names CSOG; here its stream is inside RDLT.
+        Error::Format(crate::FormatError {
+            kind: FormatErrorKind::Payload { reason, .. },
+            offset,
+            ..
+        }) => Error::payload(ChunkType::RDLT, reason, offset),
+        e => e,
     })?;
     Ok(q.into_iter().map(|v| from(v as u32)).collect())
 }
@@ -169,16 +175,26 @@ pub fn decode(
     for _ in 0..count {
         let at = r.offset();
         let head = r.take(GROUP_HEADER_LEN, "RDLT group header")?;
-        let group = AttrGroup::from_u8(head[0])
-            .ok_or_else(|| bad(format!("unknown attribute group {}", head[0]), at))?;
+        let group = AttrGroup::from_u8(head[0]).ok_or_else(|| {
+            Error::payload(
+                ChunkType::RDLT,
+                format!("unknown attribute group {}", head[0]),
+                at,
+            )
+        })?;
         if group.width(scene.sh_degree, lw) == 0 {
-            return Err(bad(
+            return Err(Error::payload(
+                ChunkType::RDLT,
                 format!("group {} does not exist in this scene", group.name()),
                 at,
             ));
         }
         if heads.iter().any(|&(g, _)| g == group) {
-            return Err(bad(format!("group {} given twice", group.name()), at));
+            return Err(Error::payload(
+                ChunkType::RDLT,
+                format!("group {} given twice", group.name()),
+                at,
+            ));
         }
         let f = |o: usize| f32::from_le_bytes(head[o..o + 4].try_into().expect("4 bytes"));
         let mode = match head[1] {
@@ -186,14 +202,21 @@ pub fn decode(
             1 => {
                 let (step, bound) = (f(4), f(8));
                 if !(step.is_finite() && step > 0.0 && bound.is_finite() && bound >= 0.0) {
-                    return Err(bad(
+                    return Err(Error::payload(
+                        ChunkType::RDLT,
                         format!("step {step} / bound {bound} for {}", group.name()),
                         at + 4,
                     ));
                 }
                 DeltaMode::Quantised { step, bound }
             }
-            m => return Err(bad(format!("unknown delta mode {m}"), at + 1)),
+            m => {
+                return Err(Error::payload(
+                    ChunkType::RDLT,
+                    format!("unknown delta mode {m}"),
+                    at + 1,
+                ))
+            }
         };
         heads.push((group, mode));
     }

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use crate::bytes::{ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
 use crate::entropy::binary_bits;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::ntc::{NtcConfig, NtcField, NtcMlp};
 
@@ -131,7 +131,7 @@ fn best_coding(segs: &[&BitSlice<u64, Lsb0>], ones: &[u64]) -> (FrequencyScope, 
 /// Encode a field. The weights are stored as f32, zstd-compressed.
 pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<u8>> {
     f.validate(scene.sh_degree, scene.lang_width())
-        .map_err(|e| Error::new(ErrorKind::InvalidInput(format!("RNTC: {e}")), 0))?;
+        .map_err(|e| Error::input(format!("RNTC: {e}")))?;
     let c = &f.config;
     if c.levels() > MAX_LEVELS
         || c.log2_table > MAX_LOG2_TABLE
@@ -139,10 +139,7 @@ pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<
         || c.features > MAX_FEATURES
         || f.mlp.hidden > MAX_HIDDEN
     {
-        return Err(Error::new(
-            ErrorKind::InvalidInput("RNTC: grid or MLP larger than §6.6 allows".into()),
-            0,
-        ));
+        return Err(Error::input("RNTC: grid or MLP larger than §6.6 allows"));
     }
     let (segs, ones) = segments(f);
     let (scope, coded) = best_coding(&segs, &ones);
@@ -183,16 +180,6 @@ pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<
     Ok(out)
 }
 
-fn bad(reason: String, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::RNTC,
-            reason,
-        },
-        at,
-    )
-}
-
 /// Decode an `RNTC` payload that starts at file offset `offset`.
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<NtcField> {
     let mut r = ByteReader::new(p, offset);
@@ -208,7 +195,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         || !(1..=MAX_LOG2_TABLE).contains(&gate_log2_table)
         || !(1..=MAX_LEVELS).contains(&levels)
     {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::RNTC,
             format!(
                 "grid shape out of range: {features} features, log2 table {log2_table}, \
                  gate log2 table {gate_log2_table}, {levels} levels"
@@ -220,7 +208,13 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let scope = match r.u8("RNTC frequency scope")? {
         0 => FrequencyScope::Segment,
         1 => FrequencyScope::Grid,
-        v => return Err(bad(format!("unknown frequency scope {v}"), at)),
+        v => {
+            return Err(Error::payload(
+                ChunkType::RNTC,
+                format!("unknown frequency scope {v}"),
+                at,
+            ))
+        }
     };
     r.u8("RNTC reserved")?;
     let mut bmin = [0f32; 3];
@@ -237,7 +231,11 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     let hidden = r.u16("RNTC hidden width")? as usize;
     let outputs = r.u16("RNTC output width")? as usize;
     if hidden == 0 || hidden > MAX_HIDDEN {
-        return Err(bad(format!("hidden width {hidden} (1..={MAX_HIDDEN})"), at));
+        return Err(Error::payload(
+            ChunkType::RNTC,
+            format!("hidden width {hidden} (1..={MAX_HIDDEN})"),
+            at,
+        ));
     }
     let config = NtcConfig {
         resolutions,
@@ -256,11 +254,16 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         let o = r.u32("RNTC segment ones")? as u64;
         let s = r.u32("RNTC segment bytes")? as usize;
         if o > n as u64 {
-            return Err(bad(format!("{o} ones in a segment of {n} bits"), at));
+            return Err(Error::payload(
+                ChunkType::RNTC,
+                format!("{o} ones in a segment of {n} bits"),
+                at,
+            ));
         }
         let constant = o == 0 || o == n as u64;
         if !s.is_multiple_of(4) || (constant && s != 0) || (!constant && s == 0) {
-            return Err(bad(
+            return Err(Error::payload(
+                ChunkType::RNTC,
                 format!("segment of {s} bytes for {o} ones of {n} bits"),
                 at,
             ));
@@ -287,10 +290,16 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 .chunks_exact(4)
                 .map(|w| u32::from_le_bytes(w.try_into().expect("4 bytes")))
                 .collect();
-            let bits = binary_bits::decode(words, n, probs[i])
-                .ok_or_else(|| bad(format!("segment {i}: invalid range-coder stream"), at))?;
+            let bits = binary_bits::decode(words, n, probs[i]).ok_or_else(|| {
+                Error::payload(
+                    ChunkType::RNTC,
+                    format!("segment {i}: invalid range-coder stream"),
+                    at,
+                )
+            })?;
             if bits.count_ones() as u64 != ones[i] {
-                return Err(bad(
+                return Err(Error::payload(
+                    ChunkType::RNTC,
                     format!(
                         "segment {i} decodes to {} ones, {} stored",
                         bits.count_ones(),
@@ -307,7 +316,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         .map(|g| g.width(scene.sh_degree, scene.lang_width()))
         .sum();
     if outputs != width {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::RNTC,
             format!("output width {outputs}, the selected groups take {width}"),
             at,
         ));
@@ -344,6 +354,6 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     };
     field
         .validate(scene.sh_degree, scene.lang_width())
-        .map_err(|e| bad(e, offset))?;
+        .map_err(|e| Error::payload(ChunkType::RNTC, e, offset))?;
     Ok(field)
 }

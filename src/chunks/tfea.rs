@@ -5,7 +5,7 @@
 
 use crate::bytes::{zstd_exact, ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 use crate::model::TimeFeatures;
 use crate::Limits;
 
@@ -251,23 +251,17 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
                 (Some(_), false) => 2,
                 (None, true) => 3,
                 (Some(_), true) => {
-                    return Err(Error::new(
-                        ErrorKind::InvalidInput(
-                            "intra-only time features use per-channel ranges (codec 3)".into(),
-                        ),
-                        0,
+                    return Err(Error::input(
+                        "intra-only time features use per-channel ranges (codec 3)",
                     ))
                 }
             };
             if *intra && packets.len() != tiling.keys {
-                return Err(Error::new(
-                    ErrorKind::InvalidInput(format!(
-                        "intra-only time features need one packet per key: {} packets, {} keys",
-                        packets.len(),
-                        tiling.keys
-                    )),
-                    0,
-                ));
+                return Err(Error::input(format!(
+                    "intra-only time features need one packet per key: {} packets, {} keys",
+                    packets.len(),
+                    tiling.keys
+                )));
             }
             b.put_u8(codec);
             b.put_u8(12);
@@ -277,20 +271,14 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
             b.put_u32(tiling.side as u32);
             if let Some((lo, hi)) = *reference {
                 if !lo.is_finite() || !hi.is_finite() {
-                    return Err(Error::new(
-                        ErrorKind::InvalidInput("time-feature range not finite".into()),
-                        0,
-                    ));
+                    return Err(Error::input("time-feature range not finite"));
                 }
                 b.extend_from_slice(&lo.to_le_bytes());
                 b.extend_from_slice(&hi.to_le_bytes());
             }
             for &(lo, hi) in ranges.iter().filter(|_| reference.is_none()) {
                 if !lo.is_finite() || !hi.is_finite() {
-                    return Err(Error::new(
-                        ErrorKind::InvalidInput("time-feature range not finite".into()),
-                        0,
-                    ));
+                    return Err(Error::input("time-feature range not finite"));
                 }
                 b.put_f32(lo);
                 b.put_f32(hi);
@@ -303,16 +291,6 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
         }
     }
     Ok(b)
-}
-
-fn bad(reason: String, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::TFEA,
-            reason,
-        },
-        at,
-    )
 }
 
 /// Parse a `TFEA` payload starting at absolute `offset`, checked against the scene and limits.
@@ -330,7 +308,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         || n != scene.n_dynamic as usize
         || keys != scene.keys_per_gop() as usize
     {
-        return Err(bad(
+        return Err(Error::payload(
+            ChunkType::TFEA,
             format!(
                 "shape ({n}, {keys}, {channels}) differs from HEAD ({}, {}, {})",
                 scene.n_dynamic,
@@ -371,8 +350,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 && tiling.width() <= 16384
                 && tiling.height() <= 16384;
             if !ok {
-                return Err(Error::new(
-                    ErrorKind::InvalidField {
+                return Err(Error::format(
+                    FormatErrorKind::InvalidField {
                         field: "TFEA side",
                         value: side as u64,
                         reason: "side^2 must cover n_dynamic and images must fit 16384^2",
@@ -388,8 +367,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 let lo = f64::from_le_bytes(r.take(8, "TFEA reference lo")?.try_into().expect("8"));
                 let hi = f64::from_le_bytes(r.take(8, "TFEA reference hi")?.try_into().expect("8"));
                 if !lo.is_finite() || !hi.is_finite() {
-                    return Err(Error::new(
-                        ErrorKind::NonFinite {
+                    return Err(Error::format(
+                        FormatErrorKind::NonFinite {
                             field: "TFEA reference range",
                         },
                         at + 16,
@@ -406,14 +385,15 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             let count = r.u32("TFEA packet count")? as usize;
             // Every packet needs at least its 4-byte length: bounds the loop by the bytes present.
             if count as u64 * 4 > r.remaining() as u64 {
-                return Err(r.err(ErrorKind::Truncated {
+                return Err(r.err(FormatErrorKind::Truncated {
                     what: "TFEA packets",
                     needed: count as u64 * 4,
                     available: r.remaining() as u64,
                 }));
             }
             if codec == 3 && count != keys {
-                return Err(bad(
+                return Err(Error::payload(
+                    ChunkType::TFEA,
                     format!("intra-only codec 3 with {count} packets for {keys} keys"),
                     r.offset() - 4,
                 ));
@@ -424,7 +404,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 packets.push(r.take(len, "TFEA packet")?.to_vec());
             }
             if r.remaining() != 0 {
-                return Err(bad(
+                return Err(Error::payload(
+                    ChunkType::TFEA,
                     format!("{} bytes after the last packet", r.remaining()),
                     r.offset(),
                 ));
@@ -437,7 +418,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 intra: codec == 3,
             })
         }
-        _ => Err(bad(
+        _ => Err(Error::payload(
+            ChunkType::TFEA,
             format!("unknown codec {codec} / bit depth {depth}"),
             at,
         )),

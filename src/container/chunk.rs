@@ -3,7 +3,7 @@
 
 pub use super::chunk_type::ChunkType;
 use crate::bytes::ByteReader;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 
 /// Flag bit 0: a reader that does not know this chunk type must stop with an error.
 pub const FLAG_MUST_UNDERSTAND: u16 = 1;
@@ -66,13 +66,13 @@ pub fn decode_header(h: &[u8; 24], offset: u64) -> Result<ChunkInfo> {
     // Under cargo-fuzz, CRCs are not enforced so that mutated inputs reach the parsers behind
     // them; every other check stays on.
     if stored != computed && !cfg!(fuzzing) {
-        return Err(Error::new(
-            ErrorKind::HeaderCrc { stored, computed },
+        return Err(Error::format(
+            FormatErrorKind::HeaderCrc { stored, computed },
             offset + 20,
         ));
     }
     if !ChunkType::is_valid(ty) {
-        return Err(Error::new(ErrorKind::InvalidChunkType(ty), offset));
+        return Err(Error::format(FormatErrorKind::InvalidChunkType(ty), offset));
     }
     Ok(ChunkInfo {
         ty: ChunkType(ty),
@@ -87,8 +87,8 @@ pub fn decode_header(h: &[u8; 24], offset: u64) -> Result<ChunkInfo> {
 pub fn check_payload_crc(info: &ChunkInfo, payload: &[u8], stored: u32) -> Result<()> {
     let computed = crc32c::crc32c(payload);
     if computed != stored && !cfg!(fuzzing) {
-        return Err(Error::new(
-            ErrorKind::PayloadCrc {
+        return Err(Error::format(
+            FormatErrorKind::PayloadCrc {
                 chunk: info.ty,
                 stored,
                 computed,

@@ -4,7 +4,7 @@ use serde::Serialize;
 
 use crate::bytes::{ByteReader, PutLe};
 use crate::container::header::SceneHeader;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 
 /// `reference_gop` value for a GOP that decodes without any other GOP.
 pub const NO_REFERENCE: u32 = u32::MAX;
@@ -35,7 +35,7 @@ impl GopHeader {
     pub fn decode(p: &[u8], offset: u64) -> Result<Self> {
         let mut r = ByteReader::new(p, offset);
         if p.len() < GOPH_LEN {
-            return Err(r.err(ErrorKind::Truncated {
+            return Err(r.err(FormatErrorKind::Truncated {
                 what: "GOPH payload",
                 needed: GOPH_LEN as u64,
                 available: p.len() as u64,
@@ -69,8 +69,8 @@ impl GopHeader {
     pub fn validate(&self, scene: &SceneHeader, g: u32, at: u64) -> Result<()> {
         let want = GopHeader::expected(scene, g);
         let field = |f: &'static str, v: u32, reason: &'static str| {
-            Err(Error::new(
-                ErrorKind::InvalidField {
+            Err(Error::format(
+                FormatErrorKind::InvalidField {
                     field: f,
                     value: v as u64,
                     reason,
@@ -144,8 +144,8 @@ impl GopIndex {
         let at = r.offset();
         let n = r.u32("GIDX entry count")?;
         if n != scene.gop_count {
-            return Err(Error::new(
-                ErrorKind::InvalidField {
+            return Err(Error::format(
+                FormatErrorKind::InvalidField {
                     field: "GIDX entry count",
                     value: n as u64,
                     reason: "must equal gop_count",
@@ -155,7 +155,7 @@ impl GopIndex {
         }
         let need = n as u64 * GIDX_ENTRY_LEN as u64;
         if need > r.remaining() as u64 {
-            return Err(r.err(ErrorKind::Truncated {
+            return Err(r.err(FormatErrorKind::Truncated {
                 what: "GIDX entries",
                 needed: need,
                 available: r.remaining() as u64,
@@ -175,22 +175,24 @@ impl GopIndex {
             let off = r.u64("GIDX offset")?;
             let length = r.u64("GIDX length")?;
             if gop != g {
-                return Err(Error::new(
-                    ErrorKind::Index("entries must be in GOP order 0, 1, ..."),
+                return Err(Error::format(
+                    FormatErrorKind::Index("entries must be in GOP order 0, 1, ..."),
                     at,
                 ));
             }
             header.validate(scene, g, at)?;
             if off != expect_offset {
-                return Err(Error::new(
-                    ErrorKind::Index("GOPs must be contiguous, starting after the scene chunks"),
+                return Err(Error::format(
+                    FormatErrorKind::Index(
+                        "GOPs must be contiguous, starting after the scene chunks",
+                    ),
                     at,
                 ));
             }
             let end = off.checked_add(length).filter(|e| *e <= gops_end);
             let Some(end) = end else {
-                return Err(Error::new(
-                    ErrorKind::Index("GOP range passes the start of GIDX"),
+                return Err(Error::format(
+                    FormatErrorKind::Index("GOP range passes the start of GIDX"),
                     at,
                 ));
             };
@@ -203,8 +205,8 @@ impl GopIndex {
             });
         }
         if expect_offset != gops_end {
-            return Err(Error::new(
-                ErrorKind::Index("GOP ranges must end where GIDX starts"),
+            return Err(Error::format(
+                FormatErrorKind::Index("GOP ranges must end where GIDX starts"),
                 offset,
             ));
         }

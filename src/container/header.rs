@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use crate::bytes::{ByteReader, PutLe};
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 
 /// The 8 magic bytes that open every `.dlgs` file.
@@ -26,14 +26,14 @@ pub fn encode_signature() -> [u8; 12] {
 /// Check the 12-byte signature. Returns (major, minor).
 pub fn decode_signature(s: &[u8]) -> Result<(u16, u16)> {
     if s.len() < 8 || s[0..8] != MAGIC {
-        return Err(Error::new(ErrorKind::BadMagic, 0));
+        return Err(Error::format(FormatErrorKind::BadMagic, 0));
     }
     let mut r = ByteReader::new(&s[8..], 8);
     let major = r.u16("version major")?;
     let minor = r.u16("version minor")?;
     if major != VERSION_MAJOR {
-        return Err(Error::new(
-            ErrorKind::UnsupportedVersion { major, minor },
+        return Err(Error::format(
+            FormatErrorKind::UnsupportedVersion { major, minor },
             8,
         ));
     }
@@ -172,15 +172,15 @@ impl SceneHeader {
     pub fn decode(p: &[u8], offset: u64, limits: &Limits) -> Result<Self> {
         let mut r = ByteReader::new(p, offset);
         if p.len() < HEAD_LEN_V1 {
-            return Err(r.err(ErrorKind::Truncated {
+            return Err(r.err(FormatErrorKind::Truncated {
                 what: "HEAD payload",
                 needed: HEAD_LEN_V1 as u64,
                 available: p.len() as u64,
             }));
         }
         let bad = |field: &'static str, value: u64, reason: &'static str, at: u64| {
-            Error::new(
-                ErrorKind::InvalidField {
+            Error::format(
+                FormatErrorKind::InvalidField {
                     field,
                     value,
                     reason,
@@ -279,12 +279,10 @@ impl SceneHeader {
             return Err(bad("gop_count", 0, "must be > 0", a_gc));
         }
         if gop_count > limits.max_gops {
-            return Err(Error::new(
-                ErrorKind::LimitExceeded {
-                    what: "gop_count",
-                    value: gop_count as u64,
-                    limit: limits.max_gops as u64,
-                },
+            return Err(Error::limit(
+                "gop_count",
+                gop_count as u64,
+                limits.max_gops as u64,
                 a_gc,
             ));
         }
@@ -300,12 +298,10 @@ impl SceneHeader {
         }
         let total = n_static as u64 + n_dynamic as u64;
         if total > limits.max_gaussians {
-            return Err(Error::new(
-                ErrorKind::LimitExceeded {
-                    what: "n_static + n_dynamic",
-                    value: total,
-                    limit: limits.max_gaussians,
-                },
+            return Err(Error::limit(
+                "n_static + n_dynamic",
+                total,
+                limits.max_gaussians,
                 a_ns,
             ));
         }

@@ -11,7 +11,7 @@ use crate::container::chunk::{
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry, TAIL_LEN};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
 use crate::container::rules::{self, Section, SectionRules};
-use crate::error::{io_err, Error, ErrorKind, Result};
+use crate::error::{io_err, Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 
 pub struct FileReader<R: Read + Seek> {
@@ -43,8 +43,8 @@ impl<R: Read + Seek> FileReader<R> {
         if sig.len() < SIGNATURE_LEN as usize {
             // A short file is only "truncated" if what is there is a magic prefix.
             decode_signature(&sig)?;
-            return Err(Error::new(
-                ErrorKind::Truncated {
+            return Err(Error::format(
+                FormatErrorKind::Truncated {
                     what: "signature",
                     needed: SIGNATURE_LEN,
                     available: file_len,
@@ -78,8 +78,8 @@ impl<R: Read + Seek> FileReader<R> {
         // TAIL -> GIDX
         let tail_size = CHUNK_OVERHEAD + TAIL_LEN as u64;
         if file_len < head.end() + tail_size {
-            return Err(Error::new(
-                ErrorKind::Truncated {
+            return Err(Error::format(
+                FormatErrorKind::Truncated {
                     what: "TAIL chunk",
                     needed: head.end() + tail_size,
                     available: file_len,
@@ -89,8 +89,8 @@ impl<R: Read + Seek> FileReader<R> {
         }
         // Anything but a valid TAIL in the last 36 bytes means the file was cut short or never
         // finished: say so rather than report whatever bytes happen to sit there.
-        let missing_tail = Error::new(
-            ErrorKind::MissingChunk(ChunkType::TAIL),
+        let missing_tail = Error::format(
+            FormatErrorKind::MissingChunk(ChunkType::TAIL),
             file_len - tail_size,
         );
         let tail = this
@@ -102,21 +102,21 @@ impl<R: Read + Seek> FileReader<R> {
         let tp = this.payload(&tail).map_err(|_| missing_tail.clone())?;
         let gidx_offset = ByteReader::new(&tp, tail.payload_offset()).u64("TAIL gidx offset")?;
         if gidx_offset < head.end() || gidx_offset >= tail.offset {
-            return Err(Error::new(
-                ErrorKind::Index("TAIL points outside the file body"),
+            return Err(Error::format(
+                FormatErrorKind::Index("TAIL points outside the file body"),
                 tail.payload_offset(),
             ));
         }
         let gidx = this.header_at(gidx_offset, tail.offset)?;
         if gidx.ty != ChunkType::GIDX || gidx.gop != SCENE_LEVEL {
-            return Err(Error::new(
-                ErrorKind::MissingChunk(ChunkType::GIDX),
+            return Err(Error::format(
+                FormatErrorKind::MissingChunk(ChunkType::GIDX),
                 gidx.offset,
             ));
         }
         if gidx.end() != tail.offset {
-            return Err(Error::new(
-                ErrorKind::Order("GIDX must be followed directly by TAIL"),
+            return Err(Error::format(
+                FormatErrorKind::Order("GIDX must be followed directly by TAIL"),
                 gidx.end(),
             ));
         }
@@ -167,8 +167,8 @@ impl<R: Read + Seek> FileReader<R> {
     /// Parse the chunk header at `offset`; the whole chunk must end at or before `region_end`.
     fn header_at(&mut self, offset: u64, region_end: u64) -> Result<ChunkInfo> {
         if offset + CHUNK_HEADER_LEN > region_end {
-            return Err(Error::new(
-                ErrorKind::Truncated {
+            return Err(Error::format(
+                FormatErrorKind::Truncated {
                     what: "chunk header",
                     needed: CHUNK_HEADER_LEN,
                     available: region_end.saturating_sub(offset),
@@ -186,8 +186,8 @@ impl<R: Read + Seek> FileReader<R> {
         rules::check_len(&info, &self.limits)?;
         let avail = region_end - offset - CHUNK_HEADER_LEN;
         if info.len.checked_add(4).is_none_or(|n| n > avail) {
-            return Err(Error::new(
-                ErrorKind::Truncated {
+            return Err(Error::format(
+                FormatErrorKind::Truncated {
                     what: "chunk payload",
                     needed: info.len + 4,
                     available: avail,
@@ -215,13 +215,10 @@ impl<R: Read + Seek> FileReader<R> {
     /// The index entry of GOP `g`.
     pub fn gop_entry(&self, g: u32) -> Result<IndexEntry> {
         self.index.entries.get(g as usize).copied().ok_or_else(|| {
-            Error::new(
-                ErrorKind::Request(format!(
-                    "GOP {g} requested, file has {}",
-                    self.scene.gop_count
-                )),
-                0,
-            )
+            Error::request(format!(
+                "GOP {g} requested, file has {}",
+                self.scene.gop_count
+            ))
         })
     }
 
@@ -232,8 +229,8 @@ impl<R: Read + Seek> FileReader<R> {
         let end = e.offset + e.length;
         let goph = self.header_at(e.offset, end)?;
         if goph.ty != ChunkType::GOPH || goph.gop != g {
-            return Err(Error::new(
-                ErrorKind::Index("GIDX entry does not point at this GOP's GOPH"),
+            return Err(Error::format(
+                FormatErrorKind::Index("GIDX entry does not point at this GOP's GOPH"),
                 e.offset,
             ));
         }
@@ -285,8 +282,8 @@ fn read_at<R: Read + Seek>(
         .read_to_end(&mut buf)
         .map_err(|e| io_err(e, offset, what))?;
     if got < n {
-        return Err(Error::new(
-            ErrorKind::Truncated {
+        return Err(Error::format(
+            FormatErrorKind::Truncated {
                 what,
                 needed: n as u64,
                 available: got as u64,

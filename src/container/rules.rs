@@ -5,19 +5,17 @@
 
 use crate::container::chunk::{ChunkInfo, ChunkType, SCENE_LEVEL};
 use crate::container::chunk_type::is_known_chunk;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 
 /// A chunk header's declared payload length against `max_chunk_len` (§8.2), checked before
 /// anything is read or reserved.
 pub(crate) fn check_len(info: &ChunkInfo, limits: &Limits) -> Result<()> {
     if info.len > limits.max_chunk_len {
-        return Err(Error::new(
-            ErrorKind::LimitExceeded {
-                what: "chunk length",
-                value: info.len,
-                limit: limits.max_chunk_len,
-            },
+        return Err(Error::limit(
+            "chunk length",
+            info.len,
+            limits.max_chunk_len,
             info.offset + 12,
         ));
     }
@@ -27,8 +25,8 @@ pub(crate) fn check_len(info: &ChunkInfo, limits: &Limits) -> Result<()> {
 /// §3.3: the first chunk after the signature is the scene-level `HEAD`.
 pub(crate) fn check_head(c: &ChunkInfo) -> Result<()> {
     if c.ty != ChunkType::HEAD || c.gop != SCENE_LEVEL {
-        return Err(Error::new(
-            ErrorKind::Order("the first chunk must be a scene-level HEAD"),
+        return Err(Error::format(
+            FormatErrorKind::Order("the first chunk must be a scene-level HEAD"),
             c.offset,
         ));
     }
@@ -78,19 +76,20 @@ impl SectionRules {
             ),
         };
         if c.gop != gop || structural {
-            return Err(Error::new(ErrorKind::Order(order), c.offset));
+            return Err(Error::format(FormatErrorKind::Order(order), c.offset));
         }
         if c.must_understand() && !is_known_chunk(c.ty) {
-            return Err(Error::new(ErrorKind::UnknownCriticalChunk(c.ty), c.offset));
+            return Err(Error::format(
+                FormatErrorKind::UnknownCriticalChunk(c.ty),
+                c.offset,
+            ));
         }
         self.count += 1;
         if self.count > limit {
-            return Err(Error::new(
-                ErrorKind::LimitExceeded {
-                    what,
-                    value: self.count as u64,
-                    limit: limit as u64,
-                },
+            return Err(Error::limit(
+                what,
+                self.count as u64,
+                limit as u64,
                 c.offset,
             ));
         }
@@ -127,7 +126,7 @@ mod tests {
         );
         let e = g.admit(&chunk(b"CRAW", 1, 3), &limits).unwrap_err();
         assert!(
-            matches!(e.kind, ErrorKind::LimitExceeded { value: 3, .. }),
+            matches!(e, Error::Limit(crate::LimitError { value: 3, .. })),
             "{e}"
         );
         let mut g = SectionRules::new(Section::Gop(3));
@@ -137,14 +136,17 @@ mod tests {
             chunk(b"TAIL", 1, 3),
         ] {
             assert!(matches!(
-                g.admit(&bad, &limits).unwrap_err().kind,
-                ErrorKind::Order(_)
+                g.admit(&bad, &limits).unwrap_err().format_kind(),
+                Some(FormatErrorKind::Order(_))
             ));
         }
         let e = g
             .admit(&chunk(b"ZZZZ", FLAG_MUST_UNDERSTAND, 3), &limits)
             .unwrap_err();
-        assert!(matches!(e.kind, ErrorKind::UnknownCriticalChunk(_)));
+        assert!(matches!(
+            e.format_kind(),
+            Some(FormatErrorKind::UnknownCriticalChunk(_))
+        ));
         let mut s = SectionRules::new(Section::Scene);
         assert!(s.admit(&chunk(b"META", 0, SCENE_LEVEL), &limits).unwrap());
         assert!(s.admit(&chunk(b"META", 0, 0), &limits).is_err());

@@ -11,7 +11,7 @@ use crate::container::chunk::{
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
 use crate::container::rules::{self, Section, SectionRules};
-use crate::error::{io_err, Error, ErrorKind, Result};
+use crate::error::{io_err, Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 
 /// What the stream produced next.
@@ -89,8 +89,8 @@ impl<R: Read> StreamReader<R> {
             .read_to_end(&mut buf)
             .map_err(|e| io_err(e, self.pos, what))?;
         if got < n {
-            return Err(Error::new(
-                ErrorKind::Truncated {
+            return Err(Error::format(
+                FormatErrorKind::Truncated {
                     what,
                     needed: n as u64,
                     available: got as u64,
@@ -139,15 +139,15 @@ impl<R: Read> StreamReader<R> {
                 State::AfterIndex => {
                     let (c, p) = self.read_chunk()?;
                     if c.ty != ChunkType::TAIL || c.gop != SCENE_LEVEL {
-                        return Err(Error::new(
-                            ErrorKind::Order("GIDX must be followed by TAIL"),
+                        return Err(Error::format(
+                            FormatErrorKind::Order("GIDX must be followed by TAIL"),
                             c.offset,
                         ));
                     }
                     let off = ByteReader::new(&p, c.payload_offset()).u64("TAIL gidx offset")?;
                     if off != self.gidx_offset {
-                        return Err(Error::new(
-                            ErrorKind::Index("TAIL does not point at GIDX"),
+                        return Err(Error::format(
+                            FormatErrorKind::Index("TAIL does not point at GIDX"),
                             c.payload_offset(),
                         ));
                     }
@@ -157,7 +157,10 @@ impl<R: Read> StreamReader<R> {
                         .read(&mut extra)
                         .map_err(|e| io_err(e, self.pos, "end of file"))?;
                     if n != 0 {
-                        return Err(Error::new(ErrorKind::Order("bytes after TAIL"), self.pos));
+                        return Err(Error::format(
+                            FormatErrorKind::Order("bytes after TAIL"),
+                            self.pos,
+                        ));
                     }
                     self.state = State::Done;
                     return Ok(None);
@@ -173,8 +176,8 @@ impl<R: Read> StreamReader<R> {
             match c.ty {
                 ChunkType::GOPH => {
                     if c.gop != next_gop || next_gop >= self.scene.gop_count {
-                        return Err(Error::new(
-                            ErrorKind::Order("GOPH out of sequence"),
+                        return Err(Error::format(
+                            FormatErrorKind::Order("GOPH out of sequence"),
                             c.offset,
                         ));
                     }
@@ -194,8 +197,8 @@ impl<R: Read> StreamReader<R> {
                 }
                 ChunkType::GIDX => {
                     if c.gop != SCENE_LEVEL || next_gop != self.scene.gop_count {
-                        return Err(Error::new(
-                            ErrorKind::Order("GIDX before the last GOP"),
+                        return Err(Error::format(
+                            FormatErrorKind::Order("GIDX before the last GOP"),
                             c.offset,
                         ));
                     }
@@ -210,8 +213,8 @@ impl<R: Read> StreamReader<R> {
                         c.offset,
                     )?;
                     if idx.entries != self.seen {
-                        return Err(Error::new(
-                            ErrorKind::Index("GIDX disagrees with the GOPs in the stream"),
+                        return Err(Error::format(
+                            FormatErrorKind::Index("GIDX disagrees with the GOPs in the stream"),
                             c.payload_offset(),
                         ));
                     }

@@ -6,7 +6,7 @@ use crate::bytes::PutLe;
 use crate::container::chunk::{encode_header, ChunkType, FLAG_MUST_UNDERSTAND, SCENE_LEVEL};
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
 use crate::container::header::{encode_signature, SceneHeader};
-use crate::error::{io_err, Error, ErrorKind, Result};
+use crate::error::{io_err, Error, Result};
 
 pub struct Writer<W: Write> {
     out: W,
@@ -55,7 +55,7 @@ impl<W: Write> Writer<W> {
     }
 
     fn misuse(&self, what: &str) -> Error {
-        Error::new(ErrorKind::Request(what.to_string()), self.pos)
+        Error::request(what.to_string())
     }
 
     /// A scene-level chunk (e.g. `META`); only before the first GOP.

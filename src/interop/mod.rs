@@ -10,7 +10,7 @@ pub mod splat;
 pub mod spz;
 pub mod spz_write;
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::Gaussians;
 
@@ -43,15 +43,12 @@ pub fn read_splat_file_with_limits(path: &std::path::Path, limits: &Limits) -> R
         _ if data.starts_with(&[0x1f, 0x8b]) => spz::read_spz(&data, limits),
         "sog" => sog::read_sog(&data, limits),
         _ if data.starts_with(b"PK\x03\x04") => sog::read_sog(&data, limits),
-        _ => Err(Error::new(
-            ErrorKind::Foreign {
-                format: "splat",
-                reason: format!(
-                    "unknown file type (PLY, .splat, SPZ or SOG expected): {}",
-                    path.display()
-                ),
-            },
-            0,
+        _ => Err(Error::foreign(
+            "splat",
+            format!(
+                "unknown file type (PLY, .splat, SPZ or SOG expected): {}",
+                path.display()
+            ),
         )),
     }
 }
@@ -67,8 +64,8 @@ mod tests {
         std::fs::write(&path, bytes).unwrap();
         let err = read_splat_file(&path).unwrap_err();
         std::fs::remove_file(&path).unwrap();
-        match err.kind {
-            ErrorKind::Foreign { reason, .. } => reason,
+        match err.format_kind() {
+            Some(crate::FormatErrorKind::Foreign { reason, .. }) => reason.clone(),
             other => panic!("{other:?}"),
         }
     }

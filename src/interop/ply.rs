@@ -5,21 +5,11 @@
 //! type; elements other than `vertex` before it must have scalar properties only (they are
 //! skipped). Degree is derived from the number of `f_rest_*` (0, 9, 24 or 45).
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::{sh_coeffs, Gaussians};
 
 const FORMAT: &str = "PLY";
-
-fn err(reason: impl Into<String>) -> Error {
-    Error::new(
-        ErrorKind::Foreign {
-            format: FORMAT,
-            reason: reason.into(),
-        },
-        0,
-    )
-}
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Encoding {
@@ -105,20 +95,24 @@ fn parse_header(data: &[u8]) -> Result<Header> {
     let pos = search
         .windows(end_marker.len())
         .position(|w| w == end_marker)
-        .ok_or_else(|| err("no end_header within the first 1 MiB"))?;
+        .ok_or_else(|| Error::foreign(FORMAT, "no end_header within the first 1 MiB"))?;
     let mut body_start = pos + end_marker.len();
     // end_header is followed by "\n" or "\r\n".
     if data.get(body_start) == Some(&b'\r') {
         body_start += 1;
     }
     if data.get(body_start) != Some(&b'\n') {
-        return Err(err("end_header not followed by a newline"));
+        return Err(Error::foreign(
+            FORMAT,
+            "end_header not followed by a newline",
+        ));
     }
     body_start += 1;
-    let text = std::str::from_utf8(&data[..pos]).map_err(|_| err("header is not UTF-8"))?;
+    let text = std::str::from_utf8(&data[..pos])
+        .map_err(|_| Error::foreign(FORMAT, "header is not UTF-8"))?;
     let mut lines = text.lines().map(str::trim);
     if lines.next() != Some("ply") {
-        return Err(err("missing 'ply' magic"));
+        return Err(Error::foreign(FORMAT, "missing 'ply' magic"));
     }
     let mut enc = None;
     let mut elements: Vec<Element> = Vec::new();
@@ -131,13 +125,13 @@ fn parse_header(data: &[u8]) -> Result<Header> {
                     "ascii" => Encoding::Ascii,
                     "binary_little_endian" => Encoding::Le,
                     "binary_big_endian" => Encoding::Be,
-                    _ => return Err(err(format!("unknown format {f}"))),
+                    _ => return Err(Error::foreign(FORMAT, format!("unknown format {f}"))),
                 })
             }
             ["element", name, count] => {
                 let count: usize = count
                     .parse()
-                    .map_err(|_| err(format!("bad element count {count}")))?;
+                    .map_err(|_| Error::foreign(FORMAT, format!("bad element count {count}")))?;
                 elements.push(Element {
                     name: name.to_string(),
                     count,
@@ -147,12 +141,12 @@ fn parse_header(data: &[u8]) -> Result<Header> {
             ["property", "list", ..] => {
                 let e = elements
                     .last()
-                    .ok_or_else(|| err("property before element"))?;
+                    .ok_or_else(|| Error::foreign(FORMAT, "property before element"))?;
                 if e.name == "vertex" || elements.iter().all(|x| x.name != "vertex") {
-                    return Err(err(format!(
-                        "list property in element '{}' is not supported",
-                        e.name
-                    )));
+                    return Err(Error::foreign(
+                        FORMAT,
+                        format!("list property in element '{}' is not supported", e.name),
+                    ));
                 }
                 // list properties after the vertex element are fine: we stop reading there.
                 elements
@@ -162,17 +156,22 @@ fn parse_header(data: &[u8]) -> Result<Header> {
                     .push((String::new(), Scalar::U8));
             }
             ["property", ty, name] => {
-                let s =
-                    Scalar::parse(ty).ok_or_else(|| err(format!("unknown property type {ty}")))?;
+                let s = Scalar::parse(ty)
+                    .ok_or_else(|| Error::foreign(FORMAT, format!("unknown property type {ty}")))?;
                 let e = elements
                     .last_mut()
-                    .ok_or_else(|| err("property before element"))?;
+                    .ok_or_else(|| Error::foreign(FORMAT, "property before element"))?;
                 e.props.push((name.to_string(), s));
             }
-            _ => return Err(err(format!("unrecognised header line '{line}'"))),
+            _ => {
+                return Err(Error::foreign(
+                    FORMAT,
+                    format!("unrecognised header line '{line}'"),
+                ))
+            }
         }
     }
-    let enc = enc.ok_or_else(|| err("missing format line"))?;
+    let enc = enc.ok_or_else(|| Error::foreign(FORMAT, "missing format line"))?;
     Ok(Header {
         enc,
         elements,
@@ -194,16 +193,18 @@ struct Columns {
 
 fn columns(props: &[(String, Scalar)]) -> Result<Columns> {
     let find = |n: &str| props.iter().position(|(p, _)| p == n);
-    let need = |n: &str| find(n).ok_or_else(|| err(format!("missing vertex property '{n}'")));
+    let need = |n: &str| {
+        find(n).ok_or_else(|| Error::foreign(FORMAT, format!("missing vertex property '{n}'")))
+    };
     let mut rest = Vec::new();
     while let Some(i) = find(&format!("f_rest_{}", rest.len())) {
         rest.push(i);
     }
     if ![0, 9, 24, 45].contains(&rest.len()) {
-        return Err(err(format!(
-            "{} f_rest properties; expected 0, 9, 24 or 45",
-            rest.len()
-        )));
+        return Err(Error::foreign(
+            FORMAT,
+            format!("{} f_rest properties; expected 0, 9, 24 or 45", rest.len()),
+        ));
     }
     let mut lang = Vec::new();
     while let Some(i) = find(&format!("lang_{}", lang.len()))
@@ -213,7 +214,10 @@ fn columns(props: &[(String, Scalar)]) -> Result<Columns> {
     }
     let lang_opacity = find("lang_opacity").or_else(|| find("opacity_lang"));
     if lang.is_empty() != lang_opacity.is_none() {
-        return Err(err("language features and lang_opacity must come together"));
+        return Err(Error::foreign(
+            FORMAT,
+            "language features and lang_opacity must come together",
+        ));
     }
     Ok(Columns {
         pos: [need("x")?, need("y")?, need("z")?],
@@ -243,8 +247,8 @@ fn read_rows(
     let ncol = e.props.len();
     match enc {
         Encoding::Ascii => {
-            let text =
-                std::str::from_utf8(&data[*at..]).map_err(|_| err("ASCII body is not UTF-8"))?;
+            let text = std::str::from_utf8(&data[*at..])
+                .map_err(|_| Error::foreign(FORMAT, "ASCII body is not UTF-8"))?;
             let mut out = Vec::new();
             let mut consumed = 0;
             for (row, line) in text.split_inclusive('\n').take(e.count).enumerate() {
@@ -253,23 +257,28 @@ fn read_rows(
                     .split_whitespace()
                     .map(|t| t.parse::<f64>())
                     .collect::<std::result::Result<_, _>>()
-                    .map_err(|_| err(format!("bad number in {} row {row}", e.name)))?;
+                    .map_err(|_| {
+                        Error::foreign(FORMAT, format!("bad number in {} row {row}", e.name))
+                    })?;
                 if vals.len() != ncol {
-                    return Err(err(format!(
-                        "{} row {row} has {} values, expected {ncol}",
-                        e.name,
-                        vals.len()
-                    )));
+                    return Err(Error::foreign(
+                        FORMAT,
+                        format!(
+                            "{} row {row} has {} values, expected {ncol}",
+                            e.name,
+                            vals.len()
+                        ),
+                    ));
                 }
                 if keep {
                     out.extend(vals);
                 }
             }
             if keep && out.len() != e.count * ncol {
-                return Err(err(format!(
-                    "{} rows of '{}' declared, fewer present",
-                    e.count, e.name
-                )));
+                return Err(Error::foreign(
+                    FORMAT,
+                    format!("{} rows of '{}' declared, fewer present", e.count, e.name),
+                ));
             }
             *at += consumed;
             Ok(out)
@@ -279,14 +288,17 @@ fn read_rows(
             let bytes = e
                 .count
                 .checked_mul(stride)
-                .ok_or_else(|| err("element size overflows"))?;
+                .ok_or_else(|| Error::foreign(FORMAT, "element size overflows"))?;
             if data.len() - *at < bytes {
-                return Err(err(format!(
-                    "{} rows of '{}' need {bytes} bytes, {} present",
-                    e.count,
-                    e.name,
-                    data.len() - *at
-                )));
+                return Err(Error::foreign(
+                    FORMAT,
+                    format!(
+                        "{} rows of '{}' need {bytes} bytes, {} present",
+                        e.count,
+                        e.name,
+                        data.len() - *at
+                    ),
+                ));
             }
             let mut out = Vec::new();
             if keep {
@@ -321,10 +333,10 @@ pub fn read_ply(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     for e in &h.elements {
         if e.name != "vertex" {
             if e.props.iter().any(|(n, _)| n.is_empty()) {
-                return Err(err(format!(
-                    "element '{}' before vertex has list properties",
-                    e.name
-                )));
+                return Err(Error::foreign(
+                    FORMAT,
+                    format!("element '{}' before vertex has list properties", e.name),
+                ));
             }
             read_rows(data, &mut at, h.enc, e, false)?;
             continue;
@@ -341,7 +353,10 @@ pub fn read_ply(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         if h.enc == Encoding::Ascii
             && e.count.saturating_mul(ncol).saturating_mul(2) > data.len() - at
         {
-            return Err(err("vertex count larger than the file can hold"));
+            return Err(Error::foreign(
+                FORMAT,
+                "vertex count larger than the file can hold",
+            ));
         }
         let rows = read_rows(data, &mut at, h.enc, e, true)?;
         let degree = match c.rest.len() {
@@ -378,7 +393,7 @@ pub fn read_ply(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         }
         return Ok(g);
     }
-    Err(err("no 'vertex' element"))
+    Err(Error::foreign(FORMAT, "no 'vertex' element"))
 }
 
 /// Write binary little-endian INRIA PLY (with normals set to 0, as the INRIA code does).

@@ -25,19 +25,9 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::Deserialize;
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::{sh_coeffs, Gaussians};
-
-fn err(reason: impl Into<String>) -> Error {
-    Error::new(
-        ErrorKind::Foreign {
-            format: "SOG",
-            reason: reason.into(),
-        },
-        0,
-    )
-}
 
 #[derive(Deserialize)]
 struct Meta {
@@ -92,14 +82,14 @@ impl Texture {
 /// Read a bundled `.sog` file (a zip holding `meta.json` and the textures it names).
 pub fn read_sog(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(data))
-        .map_err(|e| err(format!("not a readable zip: {e}")))?;
+        .map_err(|e| Error::foreign("SOG", format!("not a readable zip: {e}")))?;
     // The bundle's own files sit at its root; a zip made by hand may hold one folder.
     let meta_name = zip
         .file_names()
         .filter(|n| *n == "meta.json" || n.ends_with("/meta.json"))
         .min_by_key(|n| n.len())
         .map(str::to_string)
-        .ok_or_else(|| err("no meta.json in the zip"))?;
+        .ok_or_else(|| Error::foreign("SOG", "no meta.json in the zip"))?;
     let dir = meta_name
         .strip_suffix("meta.json")
         .unwrap_or("")
@@ -108,8 +98,8 @@ pub fn read_sog(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         let full = format!("{dir}{name}");
         let index = zip
             .index_for_name(&full)
-            .ok_or_else(|| err(format!("{full}: not in the zip")))?;
-        let zerr = |e: zip::result::ZipError| err(format!("{full}: {e}"));
+            .ok_or_else(|| Error::foreign("SOG", format!("{full}: not in the zip")))?;
+        let zerr = |e: zip::result::ZipError| Error::foreign("SOG", format!("{full}: {e}"));
         // Fuzzing builds skip the CRC of stored entries (as they skip the container's CRCs), so
         // that mutated textures reach the WebP decoder.
         if cfg!(fuzzing)
@@ -130,7 +120,10 @@ pub fn read_sog_dir(meta_json: &Path, limits: &Limits) -> Result<Gaussians> {
     let mut load = |name: &str| -> Result<Vec<u8>> {
         // Names are plain file names; anything that climbs out of the directory is refused.
         if name.contains("..") || Path::new(name).is_absolute() {
-            return Err(err(format!("texture name '{name}' leaves the directory")));
+            return Err(Error::foreign(
+                "SOG",
+                format!("texture name '{name}' leaves the directory"),
+            ));
         }
         let path = dir.join(name);
         let file = std::fs::File::open(&path)
@@ -150,37 +143,39 @@ fn read_bounded(r: impl Read, name: &str, limits: &Limits) -> Result<Vec<u8>> {
     let mut out = Vec::new();
     r.take(limits.max_chunk_len.saturating_add(1))
         .read_to_end(&mut out)
-        .map_err(|e| err(format!("{name}: {e}")))?;
+        .map_err(|e| Error::foreign("SOG", format!("{name}: {e}")))?;
     if out.len() as u64 > limits.max_chunk_len {
-        return Err(err(format!(
-            "{name}: larger than {} bytes",
-            limits.max_chunk_len
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!("{name}: larger than {} bytes", limits.max_chunk_len),
+        ));
     }
     Ok(out)
 }
 
 fn parse_meta(bytes: &[u8]) -> Result<Meta> {
-    let value: serde_json::Value =
-        serde_json::from_slice(bytes).map_err(|e| err(format!("meta.json: {e}")))?;
+    let value: serde_json::Value = serde_json::from_slice(bytes)
+        .map_err(|e| Error::foreign("SOG", format!("meta.json: {e}")))?;
     if !value.is_object() {
-        return Err(err("meta.json is not a JSON object"));
+        return Err(Error::foreign("SOG", "meta.json is not a JSON object"));
     }
     match value.get("version") {
         None => {
-            return Err(err(
+            return Err(Error::foreign(
+                "SOG",
                 "meta.json has no version: SOG version 1 is not read (re-save it with \
                  `npx @playcanvas/splat-transform IN.sog OUT.sog`)",
             ))
         }
         Some(v) if v.as_u64() == Some(2) => {}
         Some(v) => {
-            return Err(err(format!(
-                "meta.json: SOG version {v} is not read (2 is)"
-            )))
+            return Err(Error::foreign(
+                "SOG",
+                format!("meta.json: SOG version {v} is not read (2 is)"),
+            ))
         }
     }
-    serde_json::from_value(value).map_err(|e| err(format!("meta.json: {e}")))
+    serde_json::from_value(value).map_err(|e| Error::foreign("SOG", format!("meta.json: {e}")))
 }
 
 fn decode(
@@ -190,12 +185,10 @@ fn decode(
 ) -> Result<Gaussians> {
     let meta = parse_meta(meta_bytes)?;
     if meta.count > limits.max_gaussians {
-        return Err(Error::new(
-            ErrorKind::LimitExceeded {
-                what: "SOG Gaussian count",
-                value: meta.count,
-                limit: limits.max_gaussians,
-            },
+        return Err(Error::limit(
+            "SOG Gaussian count",
+            meta.count,
+            limits.max_gaussians,
             0,
         ));
     }
@@ -203,7 +196,12 @@ fn decode(
     let degree = match &meta.sh_n {
         None => 0,
         Some(s) if (1..=3).contains(&s.bands) => s.bands,
-        Some(s) => return Err(err(format!("shN.bands is {}, not 1, 2 or 3", s.bands))),
+        Some(s) => {
+            return Err(Error::foreign(
+                "SOG",
+                format!("shN.bands is {}, not 1, 2 or 3", s.bands),
+            ))
+        }
     };
     let k = sh_coeffs(degree);
     // Output floats: position 3, log-scale 3, rotation 4, opacity 1, SH 3k.
@@ -217,9 +215,10 @@ fn decode(
             .iter()
             .find(|x| !((x.abs().exp() - 1.0) as f32).is_finite())
         {
-            return Err(err(format!(
-                "{what} holds {x:e}, which decodes to a position past f32's range"
-            )));
+            return Err(Error::foreign(
+                "SOG",
+                format!("{what} holds {x:e}, which decodes to a position past f32's range"),
+            ));
         }
     }
 
@@ -228,11 +227,14 @@ fn decode(
     // names the first bad Gaussian on any thread count); the conversions below then run in
     // parallel, each Gaussian on its own.
     if let Some(i) = (0..n).find(|&i| t.quats.pixel(i)[3] < 252) {
-        return Err(err(format!(
-            "{}: Gaussian {i} has tag {} (252..=255 expected)",
-            meta.quats.files[0],
-            t.quats.pixel(i)[3]
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!(
+                "{}: Gaussian {i} has tag {} (252..=255 expected)",
+                meta.quats.files[0],
+                t.quats.pixel(i)[3]
+            ),
+        ));
     }
     let scales_book = codebook(&meta.scales.codebook, "scales")?;
     check_indices(&t.scales, n, scales_book.len(), "scales")?;
@@ -309,7 +311,7 @@ fn fetch_textures(
         files
             .get(slot)
             .cloned()
-            .ok_or_else(|| err(format!("{what}.files has no entry {slot}")))
+            .ok_or_else(|| Error::foreign("SOG", format!("{what}.files has no entry {slot}")))
     };
     // SOG's own layout pads each side of a per-Gaussian texture to a multiple of 4.
     let per_gaussian = 4 * n as u64 + 65_536;
@@ -341,10 +343,13 @@ fn fetch_textures(
         let t = t?;
         // Every texture but the centroids (slot 5) has a pixel per Gaussian.
         if i != 5 && t.width * t.height < n {
-            return Err(err(format!(
-                "{}: {}x{} pixels for {n} Gaussians",
-                jobs[i].0, t.width, t.height
-            )));
+            return Err(Error::foreign(
+                "SOG",
+                format!(
+                    "{}: {}x{} pixels for {n} Gaussians",
+                    jobs[i].0, t.width, t.height
+                ),
+            ));
         }
         textures.push(t);
     }
@@ -375,37 +380,49 @@ fn read_sh_rest(
     let book = codebook(&sh_n.codebook, "shN")?;
     // Labels are 16-bit, so a palette has at most 65,536 entries.
     if sh_n.count > 65_536 {
-        return Err(err(format!(
-            "shN.count is {}, more than 16-bit labels address",
-            sh_n.count
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!(
+                "shN.count is {}, more than 16-bit labels address",
+                sh_n.count
+            ),
+        ));
     }
     let centroids_name = &sh_n.files[0];
     if centroids.width != 64 * rest {
-        return Err(err(format!(
-            "{centroids_name}: width {} where {} bands need {}",
-            centroids.width,
-            sh_n.bands,
-            64 * rest
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!(
+                "{centroids_name}: width {} where {} bands need {}",
+                centroids.width,
+                sh_n.bands,
+                64 * rest
+            ),
+        ));
     }
     if (centroids.height as u64) * 64 < sh_n.count {
-        return Err(err(format!(
-            "{centroids_name}: {} rows hold fewer than shN.count = {} entries",
-            centroids.height, sh_n.count
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!(
+                "{centroids_name}: {} rows hold fewer than shN.count = {} entries",
+                centroids.height, sh_n.count
+            ),
+        ));
     }
     let label_of = |i: usize| {
         let p = labels.pixel(i);
         p[0] as usize | (p[1] as usize) << 8
     };
     if let Some(i) = (0..n).find(|&i| label_of(i) as u64 >= sh_n.count) {
-        return Err(err(format!(
-            "{}: Gaussian {i} has label {}, past the palette's {} entries",
-            sh_n.files[1],
-            label_of(i),
-            sh_n.count
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!(
+                "{}: Gaussian {i} has label {}, past the palette's {} entries",
+                sh_n.files[1],
+                label_of(i),
+                sh_n.count
+            ),
+        ));
     }
     let pixel_of = |entry: usize, j: usize| {
         centroids.pixel((entry / 64) * centroids.width + (entry % 64) * rest + j)
@@ -416,11 +433,14 @@ fn read_sh_rest(
                 .iter()
                 .find(|&&b| b as usize >= book.len())
             {
-                return Err(err(format!(
-                    "{centroids_name}: palette entry {entry} indexes entry {b} of a {}-entry \
+                return Err(Error::foreign(
+                    "SOG",
+                    format!(
+                        "{centroids_name}: palette entry {entry} indexes entry {b} of a {}-entry \
                      codebook",
-                    book.len()
-                )));
+                        book.len()
+                    ),
+                ));
             }
         }
     }
@@ -438,15 +458,19 @@ fn read_sh_rest(
 
 fn codebook(values: &[f64], what: &str) -> Result<Vec<f32>> {
     if values.is_empty() || values.len() > 256 {
-        return Err(err(format!(
-            "{what}.codebook has {} entries (1 to 256 expected)",
-            values.len()
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!(
+                "{what}.codebook has {} entries (1 to 256 expected)",
+                values.len()
+            ),
+        ));
     }
     if let Some(v) = values.iter().find(|v| !(**v as f32).is_finite()) {
-        return Err(err(format!(
-            "{what}.codebook holds {v:e}, past f32's range"
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!("{what}.codebook holds {v:e}, past f32's range"),
+        ));
     }
     Ok(values.iter().map(|&v| v as f32).collect())
 }
@@ -458,9 +482,10 @@ fn check_indices(texture: &Texture, n: usize, len: usize, what: &str) -> Result<
         let p = texture.pixel(i);
         p[..3].iter().find(|&&b| b as usize >= len).map(|&b| (i, b))
     }) {
-        Some((i, b)) => Err(err(format!(
-            "{what}: Gaussian {i} indexes entry {b} of a {len}-entry codebook"
-        ))),
+        Some((i, b)) => Err(Error::foreign(
+            "SOG",
+            format!("{what}: Gaussian {i} indexes entry {b} of a {len}-entry codebook"),
+        )),
         None => Ok(()),
     }
 }
@@ -491,29 +516,34 @@ fn alpha_to_logit(a: u8) -> f32 {
 
 /// Decode a lossless WebP to RGBA, its size checked before any pixel is allocated.
 fn decode_webp(bytes: &[u8], name: &str, max_pixels: u64, limits: &Limits) -> Result<Texture> {
-    let werr = |e: image_webp::DecodingError| err(format!("{name}: {e}"));
+    let werr = |e: image_webp::DecodingError| Error::foreign("SOG", format!("{name}: {e}"));
     let mut d = image_webp::WebPDecoder::new(std::io::Cursor::new(bytes)).map_err(werr)?;
     if d.is_animated() {
-        return Err(err(format!("{name}: an animated WebP, not a texture")));
+        return Err(Error::foreign(
+            "SOG",
+            format!("{name}: an animated WebP, not a texture"),
+        ));
     }
     if d.is_lossy() {
-        return Err(err(format!(
-            "{name}: lossy WebP; SOG textures are lossless (their bytes are indices)"
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!("{name}: lossy WebP; SOG textures are lossless (their bytes are indices)"),
+        ));
     }
     let (w, h) = d.dimensions();
     let (width, height) = (w as usize, h as usize);
     let pixels = (width as u64) * (height as u64);
     if pixels > max_pixels {
-        return Err(err(format!(
-            "{name}: {w}x{h} pixels, more than the {max_pixels} the layout allows"
-        )));
+        return Err(Error::foreign(
+            "SOG",
+            format!("{name}: {w}x{h} pixels, more than the {max_pixels} the layout allows"),
+        ));
     }
     limits.check_alloc("SOG texture", pixels * 4, 0)?;
     d.set_memory_limit(limits.max_alloc.min(usize::MAX as u64) as usize);
     let size = d
         .output_buffer_size()
-        .ok_or_else(|| err(format!("{name}: {w}x{h} is too large")))?;
+        .ok_or_else(|| Error::foreign("SOG", format!("{name}: {w}x{h} is too large")))?;
     let mut buf = vec![0u8; size];
     d.read_image(&mut buf).map_err(werr)?;
     let rgba = if d.has_alpha() {

@@ -2,7 +2,7 @@
 //! position f32x3 | linear scale f32x3 | RGBA u8x4 | quaternion u8x4 (w, x, y, z; q*128+128).
 #![allow(clippy::disallowed_methods)] // a foreign format: see the module doc of `interop`
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::Gaussians;
 
@@ -15,16 +15,6 @@ pub fn colour_to_dc(c: f32) -> f32 {
 }
 const STRIDE: usize = 32;
 
-fn err(reason: impl Into<String>) -> Error {
-    Error::new(
-        ErrorKind::Foreign {
-            format: ".splat",
-            reason: reason.into(),
-        },
-        0,
-    )
-}
-
 /// Inverse sigmoid of an 8-bit alpha. 0 and 255 would give +-inf, so alpha is taken as
 /// `clamp(a / 255, 0.5/255, 254.5/255)`: the logit stays within +-6.2.
 pub fn alpha_u8_to_logit(a: u8) -> f32 {
@@ -35,7 +25,10 @@ pub fn alpha_u8_to_logit(a: u8) -> f32 {
 /// Read an antimatter15 `.splat` (32 bytes per Gaussian); at most `limits.max_gaussians`.
 pub fn read_splat(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     if !data.len().is_multiple_of(STRIDE) {
-        return Err(err(format!("{} bytes is not a multiple of 32", data.len())));
+        return Err(Error::foreign(
+            ".splat",
+            format!("{} bytes is not a multiple of 32", data.len()),
+        ));
     }
     let n = data.len() / STRIDE;
     limits.check_gaussians(".splat Gaussians", n as u64, 0)?;

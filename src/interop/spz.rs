@@ -13,23 +13,13 @@
 
 use std::io::Read;
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::interop::splat::alpha_u8_to_logit;
 use crate::limits::Limits;
 use crate::model::{sh_coeffs, Gaussians};
 
 const MAGIC: u32 = 0x5053_474e;
 const COLOR_SCALE: f32 = 0.15;
-
-fn err(reason: impl Into<String>) -> Error {
-    Error::new(
-        ErrorKind::Foreign {
-            format: "SPZ",
-            reason: reason.into(),
-        },
-        0,
-    )
-}
 
 /// Sign flips per SH coefficient (index 1..16) for the RUB -> RDF change (180 deg about x).
 const SH_FLIP: [f32; 16] = [
@@ -41,25 +31,29 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         return read_v4(data, limits);
     }
     if data.len() < 2 || data[0..2] != [0x1f, 0x8b] {
-        return Err(err("neither a gzip SPZ (v2/v3) nor an NGSP v4 header"));
+        return Err(Error::foreign(
+            "SPZ",
+            "neither a gzip SPZ (v2/v3) nor an NGSP v4 header",
+        ));
     }
     let mut raw = Vec::new();
     flate2::read::GzDecoder::new(data)
         .take(limits.max_alloc)
         .read_to_end(&mut raw)
-        .map_err(|e| err(format!("gzip: {e}")))?;
+        .map_err(|e| Error::foreign("SPZ", format!("gzip: {e}")))?;
     if raw.len() < 16 {
-        return Err(err("header truncated"));
+        return Err(Error::foreign("SPZ", "header truncated"));
     }
     let u32at = |i: usize| u32::from_le_bytes(raw[i..i + 4].try_into().expect("4 bytes"));
     if u32at(0) != MAGIC {
-        return Err(err("bad NGSP magic"));
+        return Err(Error::foreign("SPZ", "bad NGSP magic"));
     }
     let version = u32at(4);
     if !(2..=3).contains(&version) {
-        return Err(err(format!(
-            "gzip container with version {version}; 2 and 3 are supported"
-        )));
+        return Err(Error::foreign(
+            "SPZ",
+            format!("gzip container with version {version}; 2 and 3 are supported"),
+        ));
     }
     let (n, degree, frac) = (u32at(8) as usize, raw[12], raw[13]);
     check_header(degree, frac)?;
@@ -67,10 +61,10 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     let sizes = stream_sizes(n, degree, rot_bytes)?;
     let need = 16 + sizes.iter().sum::<usize>();
     if raw.len() != need {
-        return Err(err(format!(
-            "{n} points need {need} bytes, {} present",
-            raw.len()
-        )));
+        return Err(Error::foreign(
+            "SPZ",
+            format!("{n} points need {need} bytes, {} present", raw.len()),
+        ));
     }
     let mut streams = Vec::with_capacity(6);
     let mut at = 16;
@@ -83,10 +77,13 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
 
 fn check_header(degree: u8, frac: u8) -> Result<()> {
     if degree > 3 {
-        return Err(err(format!("SH degree {degree} > 3")));
+        return Err(Error::foreign("SPZ", format!("SH degree {degree} > 3")));
     }
     if frac > 23 {
-        return Err(err(format!("fractional bits {frac} > 23")));
+        return Err(Error::foreign(
+            "SPZ",
+            format!("fractional bits {frac} > 23"),
+        ));
     }
     Ok(())
 }
@@ -94,20 +91,24 @@ fn check_header(degree: u8, frac: u8) -> Result<()> {
 /// Byte sizes of the six planar streams.
 fn stream_sizes(n: usize, degree: u8, rot_bytes: usize) -> Result<[usize; 6]> {
     let rest = sh_coeffs(degree) - 1;
-    let m = |k: usize| n.checked_mul(k).ok_or_else(|| err("size overflow"));
+    let m = |k: usize| {
+        n.checked_mul(k)
+            .ok_or_else(|| Error::foreign("SPZ", "size overflow"))
+    };
     Ok([m(9)?, m(1)?, m(3)?, m(3)?, m(rot_bytes)?, m(rest * 3)?])
 }
 
 fn read_v4(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     if data.len() < 32 {
-        return Err(err("v4 header truncated"));
+        return Err(Error::foreign("SPZ", "v4 header truncated"));
     }
     let u32at = |i: usize| u32::from_le_bytes(data[i..i + 4].try_into().expect("4 bytes"));
     let version = u32at(4);
     if version != 4 {
-        return Err(err(format!(
-            "uncompressed NGSP header with version {version}; only 4 is defined"
-        )));
+        return Err(Error::foreign(
+            "SPZ",
+            format!("uncompressed NGSP header with version {version}; only 4 is defined"),
+        ));
     }
     let (n, degree, frac, streams_n, toc) = (
         u32at(8) as usize,
@@ -118,14 +119,20 @@ fn read_v4(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     );
     check_header(degree, frac)?;
     if streams_n != 6 {
-        return Err(err(format!("{streams_n} streams; v4 defines 6")));
+        return Err(Error::foreign(
+            "SPZ",
+            format!("{streams_n} streams; v4 defines 6"),
+        ));
     }
     if toc < 32 || toc.checked_add(6 * 16).is_none_or(|e| e > data.len()) {
-        return Err(err("TOC outside the file"));
+        return Err(Error::foreign("SPZ", "TOC outside the file"));
     }
     let sizes = stream_sizes(n, degree, 4)?;
     if sizes.iter().sum::<usize>() as u64 > limits.max_alloc {
-        return Err(err("declared point count exceeds the allocation limit"));
+        return Err(Error::foreign(
+            "SPZ",
+            "declared point count exceeds the allocation limit",
+        ));
     }
     let u64at = |i: usize| u64::from_le_bytes(data[i..i + 8].try_into().expect("8 bytes"));
     let mut at = toc + 6 * 16;
@@ -133,22 +140,26 @@ fn read_v4(data: &[u8], limits: &Limits) -> Result<Gaussians> {
     for (k, want) in sizes.iter().enumerate() {
         let (comp, uncomp) = (u64at(toc + k * 16), u64at(toc + k * 16 + 8));
         if uncomp != *want as u64 {
-            return Err(err(format!(
-                "stream {k}: {uncomp} bytes declared, {want} expected for {n} points"
-            )));
+            return Err(Error::foreign(
+                "SPZ",
+                format!("stream {k}: {uncomp} bytes declared, {want} expected for {n} points"),
+            ));
         }
         let end = (at as u64)
             .checked_add(comp)
             .filter(|e| *e <= data.len() as u64)
-            .ok_or_else(|| err(format!("stream {k} runs past the end")))?
+            .ok_or_else(|| Error::foreign("SPZ", format!("stream {k} runs past the end")))?
             as usize;
         let out = zstd::bulk::decompress(&data[at..end], *want)
-            .map_err(|e| err(format!("stream {k}: zstd: {e}")))?;
+            .map_err(|e| Error::foreign("SPZ", format!("stream {k}: zstd: {e}")))?;
         if out.len() != *want {
-            return Err(err(format!(
-                "stream {k}: {} bytes decompressed, {want} expected",
-                out.len()
-            )));
+            return Err(Error::foreign(
+                "SPZ",
+                format!(
+                    "stream {k}: {} bytes decompressed, {want} expected",
+                    out.len()
+                ),
+            ));
         }
         owned.push(out);
         at = end;

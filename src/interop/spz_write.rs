@@ -8,7 +8,7 @@
 
 use std::io::Write;
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::model::{sh_coeffs, Gaussians};
 
 const MAGIC: u32 = 0x5053_474e;
@@ -28,16 +28,6 @@ pub enum SpzVersion {
     V3,
 }
 
-fn err(reason: impl Into<String>) -> Error {
-    Error::new(
-        ErrorKind::Foreign {
-            format: "SPZ",
-            reason: reason.into(),
-        },
-        0,
-    )
-}
-
 fn u8_of(v: f32) -> u8 {
     // NaN maps to 0 (`as` saturates); inputs are checked finite first.
     v.round().clamp(0.0, 255.0) as u8
@@ -54,9 +44,10 @@ fn fractional_bits(g: &Gaussians) -> Result<u8> {
         .rev()
         .find(|&f| max * (1u32 << f) as f32 <= ((1 << 23) - 1) as f32)
         .ok_or_else(|| {
-            err(format!(
-                "a coordinate of {max} does not fit 24-bit fixed point"
-            ))
+            Error::foreign(
+                "SPZ",
+                format!("a coordinate of {max} does not fit 24-bit fixed point"),
+            )
         })
 }
 
@@ -98,10 +89,13 @@ pub fn write_spz(g: &Gaussians, version: SpzVersion) -> Result<Vec<u8>> {
     g.check_shapes()?;
     g.check_finite()?;
     if g.sh_degree > 3 {
-        return Err(err(format!("SH degree {} > 3", g.sh_degree)));
+        return Err(Error::foreign(
+            "SPZ",
+            format!("SH degree {} > 3", g.sh_degree),
+        ));
     }
     let n = g.len();
-    let n32 = u32::try_from(n).map_err(|_| err("more than 2^32 Gaussians"))?;
+    let n32 = u32::try_from(n).map_err(|_| Error::foreign("SPZ", "more than 2^32 Gaussians"))?;
     let frac = fractional_bits(g)?;
     let rest = sh_coeffs(g.sh_degree) - 1;
     let stride = g.sh_stride();
@@ -156,7 +150,7 @@ pub fn write_spz(g: &Gaussians, version: SpzVersion) -> Result<Vec<u8>> {
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     gz.write_all(&raw)
         .and_then(|_| gz.finish())
-        .map_err(|e| err(format!("gzip: {e}")))
+        .map_err(|e| Error::foreign("SPZ", format!("gzip: {e}")))
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! (format-spec/dlgs.md §6.2–§6.4, formulas in §6.4).
 
 use crate::container::SceneHeader;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 
 /// Key time features of the dynamic Gaussians, laid out like the reference's `(N, K, C)`
 /// tensor: `data[(i * keys + k) * channels + c]`.
@@ -146,15 +146,7 @@ impl DeformMlps {
 
     /// Shapes the scene requires (§6.3 table). `at` is reported in errors.
     pub fn validate(&self, scene: &SceneHeader, at: u64) -> Result<()> {
-        let bad = |reason: String| {
-            Error::new(
-                ErrorKind::Payload {
-                    chunk: crate::container::ChunkType::MLPW,
-                    reason,
-                },
-                at,
-            )
-        };
+        let bad = |reason: String| Error::payload(crate::container::ChunkType::MLPW, reason, at);
         if scene.time_channels != 16 {
             return Err(bad(format!(
                 "the decoders' channel routing needs 16 time channels, HEAD has {}",
@@ -241,10 +233,10 @@ pub struct DynamicGop {
 /// Reject NaN/Inf before anything is written (the encoder's promise in §6).
 pub fn check_finite(what: &str, v: &[f32]) -> Result<()> {
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-        return Err(Error::new(
-            ErrorKind::InvalidInput(format!("{what}: value {} at index {i} is not finite", v[i])),
-            0,
-        ));
+        return Err(Error::input(format!(
+            "{what}: value {} at index {i} is not finite",
+            v[i]
+        )));
     }
     Ok(())
 }
@@ -266,13 +258,10 @@ impl SceneHeader {
     /// frame time snap to it, so frame times give exactly the reference's `(t_idx, delta_t)`.
     pub fn locate(&self, t: f64) -> Result<TimePoint> {
         if !t.is_finite() || t < 0.0 || t > self.duration_seconds() {
-            return Err(Error::new(
-                ErrorKind::Request(format!(
-                    "time {t} s outside the stream [0, {:.4}] s",
-                    self.duration_seconds()
-                )),
-                0,
-            ));
+            return Err(Error::request(format!(
+                "time {t} s outside the stream [0, {:.4}] s",
+                self.duration_seconds()
+            )));
         }
         let mut u = t * self.fps();
         if (u - u.round()).abs() < 1e-6 {

@@ -2,7 +2,7 @@
 //! log-scales, raw (unnormalised) w-first quaternions, pre-sigmoid opacities, SH coefficients
 //! coefficient-major per Gaussian (`[coef][rgb]`, coef 0 = DC).
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 
 /// Number of SH coefficients per colour channel for `degree` (1, 4, 9, 16).
 /// A stored (pre-activation) opacity as the opacity compositing uses: `1 / (1 + e^-x)`.
@@ -86,11 +86,8 @@ impl Gaussians {
         if ok {
             Ok(())
         } else {
-            Err(Error::new(
-                ErrorKind::InvalidInput(
-                    "Gaussian attribute arrays have inconsistent lengths".into(),
-                ),
-                0,
+            Err(Error::input(
+                "Gaussian attribute arrays have inconsistent lengths",
             ))
         }
     }
@@ -98,10 +95,9 @@ impl Gaussians {
     /// Reject NaN/Inf anywhere (the encoder's gate): names the attribute and the Gaussian.
     pub fn check_finite(&self) -> Result<()> {
         let bad = |what: &str, i: usize| {
-            Err(Error::new(
-                ErrorKind::InvalidInput(format!("{what} of Gaussian {i} is NaN or infinite")),
-                0,
-            ))
+            Err(Error::input(format!(
+                "{what} of Gaussian {i} is NaN or infinite"
+            )))
         };
         for i in 0..self.len() {
             if !self.positions[i].iter().all(|v| v.is_finite()) {

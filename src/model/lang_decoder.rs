@@ -4,7 +4,7 @@
 //!
 //! Only queries use it; decoding a scene never does.
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 
 /// One dense layer with bias, PyTorch `nn.Linear` layout.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,10 +35,6 @@ pub struct LangDecoder {
 /// The reference decoder's widths (§8 of the reference notes): 3 -> 16 -> ... -> 512.
 pub const REFERENCE_WIDTHS: [usize; 7] = [3, 16, 32, 64, 128, 256, 512];
 
-fn invalid(m: String) -> Error {
-    Error::new(ErrorKind::InvalidInput(m), 0)
-}
-
 impl LangDecoder {
     /// Input width (dimensions of one language level).
     pub fn input_dims(&self) -> usize {
@@ -62,14 +58,16 @@ impl LangDecoder {
     /// Shapes chain, every value finite, negatives have the output width.
     pub fn validate(&self) -> Result<()> {
         if self.layers.is_empty() {
-            return Err(invalid("language decoder has no layers".into()));
+            return Err(Error::input("language decoder has no layers"));
         }
         for (j, l) in self.layers.iter().enumerate() {
             if l.inputs == 0 || l.outputs == 0 {
-                return Err(invalid(format!("language decoder layer {j} has width 0")));
+                return Err(Error::input(format!(
+                    "language decoder layer {j} has width 0"
+                )));
             }
             if j > 0 && self.layers[j - 1].outputs != l.inputs {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "language decoder layer {j} takes {} inputs, layer {} gives {}",
                     l.inputs,
                     j - 1,
@@ -77,20 +75,20 @@ impl LangDecoder {
                 )));
             }
             if l.weight.len() != l.inputs * l.outputs || l.bias.len() != l.outputs {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "language decoder layer {j}: weight/bias sizes do not match {}x{}",
                     l.outputs, l.inputs
                 )));
             }
             if !l.weight.iter().chain(&l.bias).all(|v| v.is_finite()) {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "language decoder layer {j} has a NaN or infinite value"
                 )));
             }
         }
         for n in &self.negatives {
             if n.values.len() != self.embed_dims() {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "negative '{}' has {} values, the decoder outputs {}",
                     n.name,
                     n.values.len(),
@@ -98,13 +96,13 @@ impl LangDecoder {
                 )));
             }
             if !n.values.iter().all(|v| v.is_finite()) || l2_norm(&n.values) == 0.0 {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "negative '{}' is zero, NaN or infinite",
                     n.name
                 )));
             }
             if n.name.len() > 255 {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "negative name longer than 255 bytes: {}",
                     n.name
                 )));

@@ -10,7 +10,7 @@
 use bitvec::prelude::*;
 use rayon::prelude::*;
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::model::residual::{AttrGroup, SET_DYNAMIC, SET_STATIC};
 use crate::model::Canonical;
 
@@ -36,10 +36,6 @@ pub struct NtcField {
     pub groups: u8,
     /// Sets the residual applies to: `SET_STATIC | SET_DYNAMIC`.
     pub sets: u8,
-}
-
-fn invalid(msg: String) -> Error {
-    Error::new(ErrorKind::InvalidInput(msg), 0)
 }
 
 /// The groups a mask selects, ascending.
@@ -326,7 +322,8 @@ impl NtcField {
     /// The canonical state this field produces from `reference` (§6.6.5).
     pub fn apply(&self, reference: &Canonical) -> Result<Canonical> {
         let s = &reference.statics;
-        self.validate(s.sh_degree, s.lang_width).map_err(invalid)?;
+        self.validate(s.sh_degree, s.lang_width)
+            .map_err(Error::input)?;
         let mut out = reference.clone();
         for (set, bit) in [
             (&mut out.statics, SET_STATIC),

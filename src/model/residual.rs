@@ -4,7 +4,7 @@
 //! A residual turns the decoded canonical state of a reference GOP into the canonical state of
 //! the next one. The Gaussians keep their order and count; only attribute values change.
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::model::{sh_coeffs, Canonical, Gaussians};
 
 /// One attribute group of a Gaussian, in the fixed order residual rows use (§6.6.1).
@@ -162,10 +162,6 @@ pub enum DeltaTarget {
     Bound(f32),
 }
 
-fn invalid(msg: String) -> Error {
-    Error::new(ErrorKind::InvalidInput(msg), 0)
-}
-
 fn group_deltas(
     group: AttrGroup,
     mode: DeltaMode,
@@ -178,7 +174,7 @@ fn group_deltas(
         let (t, r) = (group.values(target, i), group.values(reference, i));
         for c in 0..w {
             if !t[c].is_finite() {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "{} of Gaussian {i} is {} (residual targets must be finite)",
                     group.name(),
                     t[c]
@@ -189,7 +185,7 @@ fn group_deltas(
                 DeltaMode::Quantised { step, bound } => {
                     let q = ((t[c] - r[c]) / step).round();
                     if q.abs() > 1.0e9 {
-                        return Err(invalid(format!(
+                        return Err(Error::input(format!(
                             "{} of Gaussian {i} changes by {} = {q} steps of {step}; \
                              raise the error bound",
                             group.name(),
@@ -209,7 +205,7 @@ fn group_deltas(
                         .expect("three candidates");
                     let err = (apply_delta(r[c], best, mode) - t[c]).abs();
                     if err > bound {
-                        return Err(invalid(format!(
+                        return Err(Error::input(format!(
                             "{} of Gaussian {i}: error {err} exceeds the bound {bound} \
                              (bound below the float spacing of {})",
                             group.name(),
@@ -237,7 +233,7 @@ impl DeltaResidual {
             (&target.dynamics, &reference.dynamics, "dynamic"),
         ] {
             if t.len() != r.len() || t.sh_degree != r.sh_degree || t.lang_width != r.lang_width {
-                return Err(invalid(format!(
+                return Err(Error::input(format!(
                     "residual target's {set} set ({} Gaussians, SH {}, language {}) differs \
                      from the reference's ({}, SH {}, language {})",
                     t.len(),
@@ -262,7 +258,7 @@ impl DeltaResidual {
                     bound: b,
                 },
                 DeltaTarget::Bound(b) => {
-                    return Err(invalid(format!(
+                    return Err(Error::input(format!(
                         "error bound {b} for {} must be positive and finite",
                         group.name()
                     )))

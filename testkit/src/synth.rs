@@ -13,7 +13,7 @@ use dlgs::model::residual::{groups_of, AttrGroup, SET_DYNAMIC, SET_STATIC};
 use dlgs::model::{
     Canonical, DeformMlps, DynamicGop, Gaussians, Layer, Mlp, MlpRole, TimeFeatures,
 };
-use dlgs::{Error, ErrorKind, Result};
+use dlgs::{Error, Result};
 
 /// What to generate.
 #[derive(Debug, Clone)]
@@ -279,7 +279,7 @@ fn calibrate(m: &mut Mlp, samples: &[Vec<f32>], target: &[f32]) {
 
 /// Build a dynamic model from a real canonical scene.
 pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel> {
-    let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
+    let bad = |m: String| Error::input(m);
     scene_g.check_shapes()?;
     if scene_g.len() < 2 {
         return Err(bad("the scene needs at least 2 Gaussians".into()));

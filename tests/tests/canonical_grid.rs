@@ -12,7 +12,7 @@ use dlgs::chunks::csog::{
 };
 use dlgs::container::SceneHeader;
 use dlgs::model::{Canonical, Gaussians};
-use dlgs::{ErrorKind, Limits};
+use dlgs::{Error, LimitError, Limits};
 use dlgs_decoder::Decoder;
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::orientation::closest_to_identity;
@@ -968,7 +968,7 @@ fn parted_sets_keep_all_their_cells_within_the_allocation_limit() {
     // Under the whole set's cells but above its largest part's (1,200 of 1,971 Gaussians).
     let e = csog::decode(&p, 0, &scene, &limits(cells - 1)).unwrap_err();
     assert!(
-        matches!(e.kind, ErrorKind::LimitExceeded { .. })
+        matches!(e, Error::Limit(LimitError { .. }))
             && e.to_string().contains("CSOG channel cells"),
         "{e}"
     );

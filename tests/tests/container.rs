@@ -4,7 +4,7 @@ use dlgs::chunks::craw::RawCodec;
 use dlgs::container::{
     ChunkType, FileReader, SceneHeader, StreamReader, Writer, FLAG_MUST_UNDERSTAND,
 };
-use dlgs::{ErrorKind, Limits};
+use dlgs::{Error, FormatErrorKind, LimitError, Limits};
 use dlgs_tests::{
     decode_all_random, decode_all_stream, load, multi_gop_file, with_synthetic_language,
 };
@@ -58,16 +58,16 @@ fn index_seeks_and_frame_lookup() {
     assert!(dec.frame_at(0.2, &o).unwrap().merged() == want[3].merged());
     assert!(dec.frame_at(0.0, &o).unwrap().merged() == want[0].merged());
     assert!(matches!(
-        dec.frame_at(1.0, &o).err().unwrap().kind,
-        ErrorKind::Request(_)
+        dec.frame_at(1.0, &o).err().unwrap(),
+        Error::Request(_)
     ));
     assert!(matches!(
-        dec.frame_at(f64::NAN, &o).err().unwrap().kind,
-        ErrorKind::Request(_)
+        dec.frame_at(f64::NAN, &o).err().unwrap(),
+        Error::Request(_)
     ));
     assert!(matches!(
-        dec.gop_canonical(4).unwrap_err().kind,
-        ErrorKind::Request(_)
+        dec.gop_canonical(4).unwrap_err(),
+        Error::Request(_)
     ));
 }
 
@@ -95,14 +95,14 @@ fn unknown_must_understand_chunks_are_rejected_by_both_readers() {
         let bytes = w.finish().unwrap();
         let e = decode_all_random(&bytes, Limits::default()).unwrap_err();
         assert_eq!(
-            e.kind,
-            ErrorKind::UnknownCriticalChunk(ChunkType(*b"ZZZZ")),
+            e.format_kind(),
+            Some(&FormatErrorKind::UnknownCriticalChunk(ChunkType(*b"ZZZZ"))),
             "{e}"
         );
         let e = decode_all_stream(&bytes, Limits::default()).unwrap_err();
         assert_eq!(
-            e.kind,
-            ErrorKind::UnknownCriticalChunk(ChunkType(*b"ZZZZ")),
+            e.format_kind(),
+            Some(&FormatErrorKind::UnknownCriticalChunk(ChunkType(*b"ZZZZ"))),
             "{e}"
         );
     }
@@ -116,23 +116,23 @@ fn errors_name_what_and_where() {
     let mut b = bytes.clone();
     b[1] = b'X';
     let e = FileReader::open(std::io::Cursor::new(&b)).err().unwrap();
-    assert_eq!((e.name(), e.offset), ("BadMagic", 0));
+    assert_eq!((e.name(), e.offset()), ("BadMagic", Some(0)));
     // Major version 2 at byte 8.
     let mut b = bytes.clone();
     b[8] = 2;
     let e = FileReader::open(std::io::Cursor::new(&b)).err().unwrap();
-    assert_eq!((e.name(), e.offset), ("UnsupportedVersion", 8));
+    assert_eq!((e.name(), e.offset()), ("UnsupportedVersion", Some(8)));
     // A flipped payload byte in HEAD: payload CRC error at the CRC's offset.
     let mut b = bytes.clone();
     b[12 + 24 + 2] ^= 1;
     let e = FileReader::open(std::io::Cursor::new(&b)).err().unwrap();
     assert_eq!(e.name(), "PayloadCrc");
-    assert_eq!(e.offset, 12 + 24 + 64);
+    assert_eq!(e.offset(), Some(12 + 24 + 64));
     // A flipped chunk-length byte: header CRC error.
     let mut b = bytes.clone();
     b[12 + 13] ^= 0x40;
     let e = FileReader::open(std::io::Cursor::new(&b)).err().unwrap();
-    assert_eq!((e.name(), e.offset), ("HeaderCrc", 12 + 20));
+    assert_eq!((e.name(), e.offset()), ("HeaderCrc", Some(12 + 20)));
     // Display says what and where.
     assert!(e.to_string().contains("at byte 32"), "{e}");
 }
@@ -148,22 +148,22 @@ fn limits_are_enforced_before_allocation() {
     let e = decode_all_random(&bytes, tight).unwrap_err();
     assert!(
         matches!(
-            e.kind,
-            ErrorKind::LimitExceeded {
+            e,
+            Error::Limit(LimitError {
                 what: "chunk length",
                 ..
-            }
+            })
         ),
         "{e}"
     );
     let e = decode_all_stream(&bytes, tight).unwrap_err();
     assert!(
         matches!(
-            e.kind,
-            ErrorKind::LimitExceeded {
+            e,
+            Error::Limit(LimitError {
                 what: "chunk length",
                 ..
-            }
+            })
         ),
         "{e}"
     );
@@ -174,11 +174,11 @@ fn limits_are_enforced_before_allocation() {
     let e = decode_all_random(&bytes, few).unwrap_err();
     assert!(
         matches!(
-            e.kind,
-            ErrorKind::LimitExceeded {
+            e,
+            Error::Limit(LimitError {
                 what: "n_static + n_dynamic",
                 ..
-            }
+            })
         ),
         "{e}"
     );

@@ -128,7 +128,7 @@ fn malformed_foreign_files_give_errors_not_panics() {
         .unwrap_err(),
     ] {
         assert!(
-            matches!(e.kind, dlgs::ErrorKind::LimitExceeded { limit: 1000, .. }),
+            matches!(e, dlgs::Error::Limit(dlgs::LimitError { limit: 1000, .. })),
             "{e}"
         );
     }
@@ -143,11 +143,11 @@ fn malformed_foreign_files_give_errors_not_panics() {
     .unwrap_err();
     assert!(
         matches!(
-            e.kind,
-            dlgs::ErrorKind::LimitExceeded {
+            e,
+            dlgs::Error::Limit(dlgs::LimitError {
                 what: "splat file size",
                 ..
-            }
+            })
         ),
         "{e}"
     );

@@ -14,6 +14,8 @@
 //! One function ([`code_cells`]) walks the cells for both directions, so the encoder and the
 //! decoder cannot disagree on a context.
 
+use crate::container::ChunkType;
+use crate::Error;
 use std::borrow::Borrow;
 use std::num::NonZeroU32;
 
@@ -21,7 +23,7 @@ use constriction::stream::model::{EncoderModel, EntropyModel};
 use constriction::stream::queue::DefaultRangeEncoder;
 use constriction::stream::Encode;
 
-use super::cells::{bad, class_of, neighbours, predict, read_words, zigzag};
+use super::cells::{class_of, neighbours, predict, read_words, zigzag};
 use crate::bytes::{ByteReader, PutLe};
 use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
 use crate::entropy::bit_mixer::Mixer;
@@ -170,9 +172,13 @@ pub(crate) struct Decoder<'a> {
 
 impl BitCoder for Decoder<'_> {
     fn code_p(&mut self, p0: u32, _: bool) -> Result<bool> {
-        self.dec
-            .binary(p0)
-            .map_err(|_| bad(self.r, "range coder stream ended early".into()))
+        self.dec.binary(p0).map_err(|_| {
+            Error::payload(
+                ChunkType::CSOG,
+                "range coder stream ended early",
+                self.r.offset(),
+            )
+        })
     }
 
     fn uniform(&mut self, _: u32, k: u8) -> Result<u32> {
@@ -180,9 +186,13 @@ impl BitCoder for Decoder<'_> {
             return Ok(0);
         }
         let k = k.min(PRECISION as u8);
-        self.dec
-            .uniform(k as u32)
-            .map_err(|_| bad(self.r, "range coder stream ended early".into()))
+        self.dec.uniform(k as u32).map_err(|_| {
+            Error::payload(
+                ChunkType::CSOG,
+                "range coder stream ended early",
+                self.r.offset(),
+            )
+        })
     }
 }
 
@@ -191,9 +201,10 @@ impl BitCoder for Decoder<'_> {
 pub(crate) fn open_stream(r: &mut ByteReader, what: &str) -> Result<BinaryRangeDecoder> {
     let words = read_words(r)?;
     if r.remaining() != 0 {
-        return Err(bad(
-            r,
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("{} bytes after the {what} stream", r.remaining()),
+            r.offset(),
         ));
     }
     Ok(BinaryRangeDecoder::new(words))
@@ -585,10 +596,19 @@ pub fn decode(
     prev2: Previous,
 ) -> Result<Vec<u16>> {
     let (m, k) = (r.u8("adaptive mode")?, r.u8("adaptive context bits")?);
-    let mode = Mode::from_bytes(m, k)
-        .ok_or_else(|| bad(&r, format!("adaptive mode {m} with {k} context bits")))?;
+    let mode = Mode::from_bytes(m, k).ok_or_else(|| {
+        Error::payload(
+            ChunkType::CSOG,
+            format!("adaptive mode {m} with {k} context bits"),
+            r.offset(),
+        )
+    })?;
     if let Some(why) = mode.unusable(bits, prev, prev2) {
-        return Err(bad(&r, format!("adaptive mode {mode:?}: {why}")));
+        return Err(Error::payload(
+            ChunkType::CSOG,
+            format!("adaptive mode {mode:?}: {why}"),
+            r.offset(),
+        ));
     }
     let dec = open_stream(&mut r, "adaptive")?;
     let mut q = vec![0u16; n];

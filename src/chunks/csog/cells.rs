@@ -4,7 +4,9 @@
 //! ([`super::grid_coder`]) and the adaptive one ([`super::adaptive_coder`]) build on these.
 
 use crate::bytes::ByteReader;
-use crate::error::{ErrorKind, Result};
+use crate::container::ChunkType;
+use crate::error::Result;
+use crate::Error;
 
 /// Left, up and up-left neighbours of cell `i` (0 where absent) and whether each exists.
 #[inline]
@@ -94,20 +96,13 @@ pub(crate) fn activity_threshold(q: &[u16], width: usize) -> u32 {
         .unwrap_or(0) as u32
 }
 
-pub(crate) fn bad(r: &ByteReader, reason: String) -> crate::Error {
-    r.err(ErrorKind::Payload {
-        chunk: crate::container::ChunkType::CSOG,
-        reason,
-    })
-}
-
 /// A word count (u32) and that many u32 LE words of a range-coded stream.
 pub(crate) fn read_words(r: &mut ByteReader) -> Result<Vec<u32>> {
     let nwords = r.u32("range coder word count")? as usize;
     let raw = r.take(
         nwords
             .checked_mul(4)
-            .ok_or_else(|| bad(r, "word count overflows".into()))?,
+            .ok_or_else(|| Error::payload(ChunkType::CSOG, "word count overflows", r.offset()))?,
         "range coder words",
     )?;
     Ok(raw

@@ -1,12 +1,14 @@
 //! Where a `CSOG` payload's bytes go, record by record (`dlgs info --channels`).
 
 use super::channels::channels;
-use super::records::{bad_at, layout_of, read_parts, read_set, Record, SetForm, SetRecords};
+use super::records::{layout_of, read_parts, read_set, Record, SetForm, SetRecords};
 use crate::bytes::ByteReader;
 use crate::chunks::csog::grid_coder::GridCodec;
+use crate::container::ChunkType;
 use crate::container::SceneHeader;
 use crate::error::Result;
 use crate::model::Gaussians;
+use crate::Error;
 
 /// One record of a `CSOG` payload: what it holds, how it is coded and how many bytes its data
 /// takes (for `dlgs info --channels`). Record heads, ranges and counts are not in `bytes`.
@@ -113,7 +115,8 @@ pub fn describe(p: &[u8], offset: u64, scene: &SceneHeader) -> Result<CsogSummar
         }
     }
     if r.remaining() != 0 {
-        return Err(bad_at(
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("{} bytes after the last channel", r.remaining()),
             r.offset(),
         ));

@@ -5,6 +5,8 @@
 //! with `constriction`, one static model per activity context) and raw mantissa bits (packed
 //! with `bitvec`).
 
+use crate::container::ChunkType;
+use crate::Error;
 use bitvec::prelude::*;
 use constriction::stream::model::ContiguousCategoricalEntropyModel;
 use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
@@ -12,10 +14,10 @@ use constriction::stream::{Decode, Encode};
 
 use super::adaptive_coder::{self, Mode, Previous};
 use super::cells::{
-    activity_threshold, bad, class_of, context, neighbours, predict, read_words, unzigzag, zigzag,
+    activity_threshold, class_of, context, neighbours, predict, read_words, unzigzag, zigzag,
 };
 use crate::bytes::{ByteReader, PutLe};
-use crate::error::{ErrorKind, Result};
+use crate::error::Result;
 
 /// Probability precision of the class models (probabilities are stored as u16 < 2^12).
 pub const PRECISION: usize = 12;
@@ -139,9 +141,10 @@ pub fn decode_predictive(mut r: ByteReader, n: usize, width: usize, bits: u8) ->
     for _ in 0..CONTEXTS {
         let k = r.u8("grid class count")? as usize;
         if k > bits as usize + 1 {
-            return Err(bad(
-                &r,
+            return Err(Error::payload(
+                ChunkType::CSOG,
                 format!("{k} magnitude classes for {bits}-bit values"),
+                r.offset(),
             ));
         }
         if k == 0 {
@@ -153,40 +156,45 @@ pub fn decode_predictive(mut r: ByteReader, n: usize, width: usize, bits: u8) ->
             p.push(r.u16("grid class probability")? as u32);
         }
         if p.contains(&0) || p.iter().sum::<u32>() != 1 << PRECISION {
-            return Err(bad(
-                &r,
-                "class probabilities must be >= 1 and sum to 4096".into(),
+            return Err(Error::payload(
+                ChunkType::CSOG,
+                "class probabilities must be >= 1 and sum to 4096",
+                r.offset(),
             ));
         }
-        models.push(Some(
-            model(&p).ok_or_else(|| bad(&r, "invalid class model".into()))?,
-        ));
+        models.push(Some(model(&p).ok_or_else(|| {
+            Error::payload(ChunkType::CSOG, "invalid class model", r.offset())
+        })?));
     }
     let words = read_words(&mut r)?;
     let at = r.offset();
     let mantissa = BitSlice::<u8, Lsb0>::from_slice(r.rest());
     let mut mpos = 0usize;
     let mut dec = DefaultRangeDecoder::from_compressed(words)
-        .map_err(|_| bad(&r, "range coder stream".into()))?;
+        .map_err(|_| Error::payload(ChunkType::CSOG, "range coder stream", r.offset()))?;
     let mut q = vec![0u16; n];
     for i in 0..n {
         let (a, b, c, ha, hb) = neighbours(&q, i, width);
         let ctx = context(a, b, c, t0);
         let m = models[ctx].as_ref().ok_or_else(|| {
-            bad(
-                &r,
+            Error::payload(
+                ChunkType::CSOG,
                 format!("cell {i} falls in context {ctx}, which has no model"),
+                r.offset(),
             )
         })?;
-        let cl = dec
-            .decode_symbol(m)
-            .map_err(|_| bad(&r, format!("range coder failed at cell {i}")))?
-            as u32;
+        let cl = dec.decode_symbol(m).map_err(|_| {
+            Error::payload(
+                ChunkType::CSOG,
+                format!("range coder failed at cell {i}"),
+                r.offset(),
+            )
+        })? as u32;
         let z = if cl >= 2 {
             let nb = (cl - 1) as usize;
             let Some(bits_) = mantissa.get(mpos..mpos + nb) else {
-                return Err(crate::Error::new(
-                    ErrorKind::Truncated {
+                return Err(crate::Error::format(
+                    crate::error::FormatErrorKind::Truncated {
                         what: "grid mantissa bits",
                         needed: (mpos + nb).div_ceil(8) as u64,
                         available: (mantissa.len() / 8) as u64,
@@ -276,9 +284,10 @@ pub fn decode_histogram(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<u16
     let at = r.offset();
     let symbols = r.u16("histogram symbol count")? as usize;
     if !(2..=HIST_MAX_SYMBOLS).contains(&symbols) || symbols > 1 << bits {
-        return Err(bad(
-            &r,
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("{symbols} histogram symbols for {bits}-bit values (2..=min(4096, 2^bits))"),
+            r.offset(),
         ));
     }
     let tlen = r.u32("histogram table length")? as usize;
@@ -288,27 +297,33 @@ pub fn decode_histogram(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<u16
         .map(|b| u16::from_le_bytes([b[0], b[1]]) as u32)
         .collect();
     if p.contains(&0) || p.iter().map(|&v| v as u64).sum::<u64>() != 1 << HIST_PRECISION {
-        return Err(bad(
-            &r,
-            "histogram probabilities must be >= 1 and sum to 65536".into(),
+        return Err(Error::payload(
+            ChunkType::CSOG,
+            "histogram probabilities must be >= 1 and sum to 65536",
+            r.offset(),
         ));
     }
     let model = HistModel::from_nonzero_fixed_point_probabilities(&p, false)
-        .map_err(|_| bad(&r, "invalid histogram model".into()))?;
+        .map_err(|_| Error::payload(ChunkType::CSOG, "invalid histogram model", r.offset()))?;
     let words = read_words(&mut r)?;
     if r.remaining() != 0 {
-        return Err(bad(
-            &r,
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("{} bytes after the histogram stream", r.remaining()),
+            r.offset(),
         ));
     }
     let mut dec = DefaultRangeDecoder::from_compressed(words)
-        .map_err(|_| bad(&r, "range coder stream".into()))?;
+        .map_err(|_| Error::payload(ChunkType::CSOG, "range coder stream", r.offset()))?;
     let mut q = Vec::with_capacity(n);
     for i in 0..n {
-        let v = dec
-            .decode_symbol(&model)
-            .map_err(|_| bad(&r, format!("range coder failed at cell {i}")))?;
+        let v = dec.decode_symbol(&model).map_err(|_| {
+            Error::payload(
+                ChunkType::CSOG,
+                format!("range coder failed at cell {i}"),
+                r.offset(),
+            )
+        })?;
         q.push(v as u16);
     }
     Ok(q)
@@ -477,11 +492,9 @@ pub fn decode(
         }
     };
     if let Some(i) = q.iter().position(|&v| (v as u32) >> bits != 0) {
-        return Err(crate::Error::new(
-            ErrorKind::Payload {
-                chunk: crate::container::ChunkType::CSOG,
-                reason: format!("cell {i} holds {} which does not fit {bits} bits", q[i]),
-            },
+        return Err(crate::Error::payload(
+            crate::container::ChunkType::CSOG,
+            format!("cell {i} holds {} which does not fit {bits} bits", q[i]),
             at,
         ));
     }

@@ -11,10 +11,11 @@
 //! uniform), and a voxel of the
 //! last level that holds several points codes how many.
 
+use crate::container::ChunkType;
+use crate::Error;
 use constriction::stream::queue::DefaultRangeEncoder;
 
 use super::adaptive_coder::{open_stream, Adaptive, BitCoder, Decoder, Encoder};
-use super::cells::bad;
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::Result;
 
@@ -183,7 +184,11 @@ fn encode_node(
 /// Decode `n` points of `bits` per axis from exactly the bytes of `r`, in Morton order.
 pub fn decode(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<[u16; 3]>> {
     if !(1..=MAX_BITS).contains(&bits) {
-        return Err(bad(&r, format!("octree of {bits} bits per axis (1..=16)")));
+        return Err(Error::payload(
+            ChunkType::CSOG,
+            format!("octree of {bits} bits per axis (1..=16)"),
+            r.offset(),
+        ));
     }
     let dec = open_stream(&mut r, "octree")?;
     let mut c = Decoder { dec, r: &r };
@@ -203,9 +208,10 @@ pub fn decode(mut r: ByteReader, n: usize, bits: u8) -> Result<Vec<[u16; 3]>> {
         }
     }
     if out.len() != n {
-        return Err(bad(
-            &r,
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("the octree holds {} points, the set {n}", out.len()),
+            r.offset(),
         ));
     }
     Ok(out)
@@ -253,7 +259,11 @@ fn decode_node(
             .map(|&s| if s { 1 } else { 2 })
             .sum::<usize>();
     if *least > n {
-        return Err(bad(c.r, format!("the octree holds more than {n} points")));
+        return Err(Error::payload(
+            ChunkType::CSOG,
+            format!("the octree holds more than {n} points"),
+            c.r.offset(),
+        ));
     }
     let shift = bits as usize - 1 - level;
     for (&j, &lone) in digits[..k].iter().zip(&single) {
@@ -269,7 +279,13 @@ fn decode_node(
         } else if level + 1 == bits as usize {
             let count = code_count(c, m, 0)?
                 .filter(|&v| v <= (n - *least + 2) as u64)
-                .ok_or_else(|| bad(c.r, format!("the octree holds more than {n} points")))?;
+                .ok_or_else(|| {
+                    Error::payload(
+                        ChunkType::CSOG,
+                        format!("the octree holds more than {n} points"),
+                        c.r.offset(),
+                    )
+                })?;
             *least = *least - 2 + count as usize;
             out.extend(std::iter::repeat_n(child, count as usize));
         } else {

@@ -1,13 +1,13 @@
 //! Decoding a `CSOG` payload: every part's octree and chains of records from one shared task
 //! list, then each part dequantised into Gaussians.
 
+use crate::container::ChunkType;
+use crate::Error;
 use rayon::prelude::*;
 
 use super::channels::{channels, Kind, FIRST_ROTATION};
 use super::quantiser::{dequantise, grid_width, levels, logit};
-use super::records::{
-    bad_at, layout_of, read_parts, read_set, OctreeRecord, Record, SetForm, SetRecords,
-};
+use super::records::{layout_of, read_parts, read_set, OctreeRecord, Record, SetForm, SetRecords};
 use super::rotation_coarsening::{cells_by_shift, rotation_shift};
 use super::{kd_layout, octree_positions};
 use crate::bytes::ByteReader;
@@ -359,7 +359,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         ),
     };
     if r.remaining() != 0 {
-        return Err(bad_at(
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("{} bytes after the last channel", r.remaining()),
             r.offset(),
         ));

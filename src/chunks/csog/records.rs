@@ -12,17 +12,7 @@ use crate::chunks::csog::adaptive_coder::Mode;
 use crate::chunks::csog::grid_coder::GridCodec;
 use crate::chunks::csog::octree_positions;
 use crate::container::ChunkType;
-use crate::error::{Error, ErrorKind, Result};
-
-pub(super) fn bad_at(reason: String, at: u64) -> Error {
-    Error::new(
-        ErrorKind::Payload {
-            chunk: ChunkType::CSOG,
-            reason,
-        },
-        at,
-    )
-}
+use crate::error::{Error, Result};
 
 /// How a set's record is laid out (by the `CSOG` layout version).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,7 +74,8 @@ pub(super) fn read_set<'a>(
     if !compact {
         let stored = r.u32("CSOG grid width")? as usize;
         if stored != w {
-            return Err(bad_at(
+            return Err(Error::payload(
+                ChunkType::CSOG,
                 format!("grid width {stored} for {n} Gaussians, expected {w}"),
                 at,
             ));
@@ -92,7 +83,8 @@ pub(super) fn read_set<'a>(
         let at = r.offset();
         let count = r.u16("CSOG channel count")? as usize;
         if count != kinds.len() {
-            return Err(bad_at(
+            return Err(Error::payload(
+                ChunkType::CSOG,
                 format!("{count} channels, the layout has {}", kinds.len()),
                 at,
             ));
@@ -122,7 +114,8 @@ pub(super) fn read_set<'a>(
         let at = r.offset();
         let max_shift = r.u8("CSOG rotation max shift")?;
         if max_shift > MAX_ROTATION_SHIFT {
-            return Err(bad_at(
+            return Err(Error::payload(
+                ChunkType::CSOG,
                 format!("rotation max shift {max_shift} (at most {MAX_ROTATION_SHIFT})"),
                 at,
             ));
@@ -145,17 +138,23 @@ pub(super) fn read_set<'a>(
         };
         let bits = bits + compact as u8;
         if !(1..=16).contains(&bits) || (is_index && bits != 2) {
-            return Err(bad_at(format!("{k:?}: {bits} bits"), at));
+            return Err(Error::payload(
+                ChunkType::CSOG,
+                format!("{k:?}: {bits} bits"),
+                at,
+            ));
         }
-        let codec = GridCodec::from_u8(codec)
-            .ok_or_else(|| bad_at(format!("unknown grid codec {codec}"), at))?;
+        let codec = GridCodec::from_u8(codec).ok_or_else(|| {
+            Error::payload(ChunkType::CSOG, format!("unknown grid codec {codec}"), at)
+        })?;
         // The records after octree positions start without a previous channel.
         let prev_bits = records
             .last()
             .filter(|_| records.len() > first)
             .map(|p| p.bits);
         if codec == GridCodec::HistogramDelta && prev_bits != Some(bits) {
-            return Err(bad_at(
+            return Err(Error::payload(
+                ChunkType::CSOG,
                 format!("{k:?}: codec 4 needs a previous channel with the same {bits} bits"),
                 at,
             ));
@@ -163,8 +162,9 @@ pub(super) fn read_set<'a>(
         let at = r.offset();
         let (min, max) = match (compact, is_index) {
             (true, true) if half => {
-                return Err(bad_at(
-                    "the rotation index record has no range to flag".into(),
+                return Err(Error::payload(
+                    ChunkType::CSOG,
+                    "the rotation index record has no range to flag",
                     at,
                 ))
             }
@@ -172,8 +172,9 @@ pub(super) fn read_set<'a>(
             _ => read_range(r, half, "CSOG channel min", "CSOG channel max")?,
         };
         if is_index && (min, max) != (0.0, 3.0) {
-            return Err(bad_at(
-                "rotation index channel must have range [0, 3]".into(),
+            return Err(Error::payload(
+                ChunkType::CSOG,
+                "rotation index channel must have range [0, 3]",
                 at,
             ));
         }
@@ -233,7 +234,8 @@ fn read_range(
 /// read it, the count put back after the first `at_byte` bytes. The words must be whole.
 fn with_word_count(data: &[u8], at_byte: usize, at: u64) -> Result<Cow<'_, [u8]>> {
     if data.len() < at_byte || !(data.len() - at_byte).is_multiple_of(4) {
-        return Err(bad_at(
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!(
                 "{} bytes of stream after its {at_byte}-byte head: not whole 32-bit words",
                 data.len().saturating_sub(at_byte)
@@ -257,7 +259,11 @@ fn read_octree_record<'a>(r: &mut ByteReader<'a>, compact: bool) -> Result<Octre
         false => (head, false),
     };
     if !(1..=octree_positions::MAX_BITS).contains(&bits) {
-        return Err(bad_at(format!("octree positions of {bits} bits"), at));
+        return Err(Error::payload(
+            ChunkType::CSOG,
+            format!("octree positions of {bits} bits"),
+            at,
+        ));
     }
     let mut ranges = [(0.0f32, 0.0f32); 3];
     for range in ranges.iter_mut() {
@@ -294,7 +300,8 @@ pub(super) fn read_parts<'a>(
     let at = r.offset();
     let parts = r.u8("CSOG part count")? as usize;
     if parts > MAX_PARTS || (parts == 0 && n > 0) {
-        return Err(bad_at(
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("{parts} parts for {n} Gaussians (1..={MAX_PARTS}; 0 only for none)"),
             at,
         ));
@@ -307,7 +314,8 @@ pub(super) fn read_parts<'a>(
             false => r.u32("CSOG part Gaussian count")?,
         } as usize;
         if np > left {
-            return Err(bad_at(
+            return Err(Error::payload(
+                ChunkType::CSOG,
                 format!("part {p} holds {np} Gaussians, only {left} of the set's {n} are left"),
                 at,
             ));
@@ -316,7 +324,8 @@ pub(super) fn read_parts<'a>(
         each(r, np)?;
     }
     if left != 0 {
-        return Err(bad_at(
+        return Err(Error::payload(
+            ChunkType::CSOG,
             format!("the parts hold {} of the set's {n} Gaussians", n - left),
             at,
         ));
@@ -334,7 +343,8 @@ pub(super) fn layout_of(version: u8, at: u64) -> Result<Option<(SetForm, bool)>>
         3 => Ok(Some((SetForm::OctreeCoarse, false))),
         // Layout 4 is layout 3 in compact records (§6.5.7).
         4 => Ok(Some((SetForm::OctreeCoarse, true))),
-        _ => Err(bad_at(
+        _ => Err(Error::payload(
+            ChunkType::CSOG,
             format!("layout version {version} (this reader knows 0 to 4)"),
             at,
         )),

@@ -9,7 +9,7 @@ use super::{QuantBits, MAX_PARTS};
 use crate::bytes::PutLe;
 use crate::chunks::csog::grid_coder::{self, GridCodec};
 use crate::chunks::csog::half_range;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::model::{Canonical, Gaussians};
 
 /// Bytes of a channel record before its data in layouts 0-3: bits, codec, min, max, len
@@ -161,15 +161,16 @@ pub fn encode_shaped(
     zstd_level: i32,
     static_weight: Option<&[f32]>,
 ) -> Result<Vec<u8>> {
-    let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
     for &b in &bits.all() {
         if !(1..=16).contains(&b) {
-            return Err(bad(format!("quantisation bits must be 1..=16, got {b}")));
+            return Err(Error::input(format!(
+                "quantisation bits must be 1..=16, got {b}"
+            )));
         }
     }
     if let Some(s) = static_weight {
         if s.len() != c.statics.len() || s.iter().any(|w| !(*w >= 0.0)) {
-            return Err(bad(format!(
+            return Err(Error::input(format!(
                 "{} shaping weights (each >= 0) for {} static Gaussians",
                 s.len(),
                 c.statics.len()
@@ -248,10 +249,9 @@ pub fn encode_octree(gop: &PartedGop, zstd_level: i32) -> Result<(Vec<u8>, Vec<u
 }
 
 fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<u8>, Vec<u32>)> {
-    let bad = |m: String| Error::new(ErrorKind::InvalidInput(m), 0);
     let static_parts = gop.static_parts;
     if !(1..=MAX_PARTS).contains(&static_parts.len()) {
-        return Err(bad(format!(
+        return Err(Error::input(format!(
             "{} static parts (1..={MAX_PARTS})",
             static_parts.len()
         )));
@@ -262,7 +262,9 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
         .chain([(gop.dynamics, gop.dynamic_bits)]);
     for (g, b) in all {
         if let Some(x) = b.all().into_iter().find(|x| !(1..=16).contains(x)) {
-            return Err(bad(format!("quantisation bits must be 1..=16, got {x}")));
+            return Err(Error::input(format!(
+                "quantisation bits must be 1..=16, got {x}"
+            )));
         }
         g.check_shapes()?;
         g.check_finite()?;
@@ -270,7 +272,7 @@ fn encode_parted(gop: &PartedGop, zstd_level: i32, octree: bool) -> Result<(Vec<
     let n_static: usize = static_parts.iter().map(|p| p.0.len()).sum();
     if let Some(s) = gop.static_weight {
         if s.len() != n_static || s.iter().any(|w| !(*w >= 0.0)) {
-            return Err(bad(format!(
+            return Err(Error::input(format!(
                 "{} shaping weights (each >= 0) for {n_static} static Gaussians",
                 s.len()
             )));
