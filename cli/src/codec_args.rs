@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::chunks::craw::RawCodec;
-use dlgs::chunks::csog::grid_coder;
+use dlgs::chunks::csog::grid_codecs as grid_coder;
 use dlgs::chunks::csog::{QuantBits, RotationCoarsening};
 use dlgs::chunks::mlpw::WeightType;
 use dlgs::container::header::ResidualMode;

@@ -36,7 +36,7 @@ fn bench(c: &mut Criterion) {
         };
         csog::encode_octree(&gop, 9).unwrap().0
     };
-    let default = Some(dlgs::chunks::csog::grid_coder::MIXED_MARGIN);
+    let default = Some(dlgs::chunks::csog::grid_codecs::MIXED_MARGIN);
     let octree = octree_payload(None, default);
     let coarse = octree_payload(Some(RotationCoarsening::DEFAULT), default);
     // `dlgs encode --fast-decode`: the default layout without codec 5's mixed modes.
@@ -90,7 +90,9 @@ fn bench(c: &mut Criterion) {
 /// Decode time of one channel in each codec-5 mode (single thread: a channel is one stream).
 fn codec5_modes(c: &mut Criterion, g: &dlgs::model::Gaussians) {
     use dlgs::bytes::ByteReader;
-    use dlgs::chunks::csog::adaptive_coder::{decode, encode, Mode};
+    use dlgs::chunks::csog::grid_codecs::{
+        adaptive_decode as decode, adaptive_encode as encode, AdaptiveMode as Mode,
+    };
     let set = csog::quantise_set(g, &QuantBits::HIGH);
     // Channels: position 3, log-scale 3, rotation index and 3 components, opacity, then DC.
     let dc = 11;

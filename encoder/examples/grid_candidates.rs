@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use dlgs::chunks::csog::grid_coder;
+use dlgs::chunks::csog::grid_codecs as grid_coder;
 use dlgs::chunks::csog::{grid_width, quantise_set, QuantBits};
 use dlgs_encoder::grid_sort::{grid_order, permute, SortSpec};
 use dlgs_encoder::invisible::drop_never_drawn;

@@ -124,7 +124,7 @@ impl Judge {
                 compact_records: true,
                 // Bytes judged as the default coder makes them, also under `--fast-decode`
                 // or `--mixed-margin` (which add a few percent to every candidate alike).
-                mixed_margin: Some(dlgs::chunks::csog::grid_coder::MIXED_MARGIN),
+                mixed_margin: Some(dlgs::chunks::csog::grid_codecs::MIXED_MARGIN),
             };
             csog::encode_octree(&gop, self.zstd_level)?.0
         } else {

@@ -168,7 +168,7 @@ pub struct CanonicalSettings {
     pub compact_records: bool,
     /// Lossy (`CSOG`) scenes: let channels take codec 5's mixed-context modes where they code
     /// smaller than any other coding by this fraction (format 1.13; default
-    /// [`MIXED_MARGIN`](dlgs::chunks::csog::grid_coder::MIXED_MARGIN), `dlgs encode
+    /// [`MIXED_MARGIN`](dlgs::chunks::csog::grid_codecs::MIXED_MARGIN), `dlgs encode
     /// --mixed-margin`). `None` (`dlgs encode --fast-decode`): the same values in files 1.5-3.1 %
     /// larger that decode in about half the time (docs/benchmarks/decode.md "Decode time
     /// against SOG and SPZ").
@@ -183,7 +183,7 @@ impl Default for CanonicalSettings {
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
             compact_records: true,
-            mixed_margin: Some(dlgs::chunks::csog::grid_coder::MIXED_MARGIN),
+            mixed_margin: Some(dlgs::chunks::csog::grid_codecs::MIXED_MARGIN),
         }
     }
 }

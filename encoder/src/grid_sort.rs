@@ -8,8 +8,8 @@
 //! quarter of the grid to 1. Deterministic: no randomness, groups are disjoint so rounds run in parallel
 //! with the same result on any thread count.
 
+use dlgs::chunks::csog::grid_codecs::{first_valid, halves, valid_in};
 use dlgs::chunks::csog::grid_width;
-use dlgs::chunks::csog::kd_layout::{first_valid, halves, valid_in};
 use dlgs::model::Gaussians;
 use rayon::prelude::*;
 

@@ -1,5 +1,5 @@
 //! How much each Gaussian of a still scene is worth in the grid shaper
-//! (`dlgs::chunks::csog::grid_shaping`): a Gaussian that adds little to any image may take a level
+//! (`dlgs::chunks::csog::grid_codecs::MAX_MOVE`): a Gaussian that adds little to any image may take a level
 //! the entropy coder pays less for, at a larger error.
 //!
 //! Importance is the Gaussian's blending weight summed over 36 views of its own

@@ -3,5 +3,5 @@
 //! (format-spec §6.5.3, §6.6.3, Appendix A).
 
 pub mod binary_bits;
-pub mod binary_range_decoder;
-pub mod bit_mixer;
+pub(crate) mod binary_range_decoder;
+pub(crate) mod bit_mixer;

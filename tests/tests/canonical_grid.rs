@@ -5,7 +5,7 @@
 use std::io::Cursor;
 
 use dlgs::bytes::ByteReader;
-use dlgs::chunks::csog::grid_coder::{self, GridCodec};
+use dlgs::chunks::csog::grid_codecs::{self as grid_coder, GridCodec};
 use dlgs::chunks::csog::{
     self, dequantise, quantise_set, robust_radius, rotation_shift, QuantBits, RotationCoarsening,
     LOG_SCALE_BELOW_RADIUS, LOG_SCALE_SPAN,
@@ -58,7 +58,10 @@ fn eight_bit_colours_decode_to_their_own_values() {
     // A float-valued scene takes the min/max range as before: the donut's DC is not on colours.
     let donut = load("ply/v3dg_donut_mipsplatting_45624_sh0.ply");
     let dc: Vec<f32> = donut.sh.iter().step_by(3).copied().collect();
-    assert_eq!(dlgs::chunks::csog::colour_lattice::range(&dc, 8), None);
+    assert_eq!(
+        dlgs::chunks::csog::grid_codecs::colour_lattice_range(&dc, 8),
+        None
+    );
 }
 
 #[test]
@@ -815,7 +818,7 @@ fn shaped_levels_stay_near_their_values_and_shrink_a_real_sh3_scene() {
         let (b, lo, hi, _) = q.channels[c];
         (hi - lo) / ((1u32 << b) - 1) as f32
     };
-    let limit = |c: usize| step(c) * (dlgs::chunks::csog::grid_shaping::MAX_MOVE as f32 + 0.01);
+    let limit = |c: usize| step(c) * (dlgs::chunks::csog::grid_codecs::MAX_MOVE as f32 + 0.01);
     assert_eq!(shaped.len(), plain.len());
     let mut moved = 0;
     for i in 0..plain.len() {

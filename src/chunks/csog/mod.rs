@@ -1,7 +1,7 @@
 //! `CSOG`: canonical Gaussians as quantised attribute grids (format-spec §6.5). The encoder
 //! sorts each set so that grid neighbours are similar (`dlgs-encoder`'s grid sort); this module
 //! only quantises, lays every channel out as a `width`-wide grid in set order and codes it
-//! losslessly with [`grid_coder`](crate::chunks::csog::grid_coder). Decoding restores the quantised
+//! losslessly with one of the grid codecs ([`grid_codecs`]). Decoding restores the quantised
 //! values exactly.
 //!
 //! - [`channels`]: what each channel holds, in payload order;
@@ -11,18 +11,21 @@
 //! - [`writer`]: the payload's records and the encoder's entry points;
 //! - [`records`]: the records read and checked, not decoded;
 //! - [`reader`]: the records decoded into Gaussians;
-//! - [`describe`]: the records summarised for reports.
+//! - [`describe`]: the records summarised for reports;
+//! - [`grid_codecs`]: the facade for writers, conformance generators and benches (the one
+//!   way in to the lossless grid codecs and the layout helpers; everything else is internal).
 
-pub mod adaptive_coder;
+mod adaptive_coder;
 mod cells;
 mod channels;
-pub mod colour_lattice;
+mod colour_lattice;
 mod describe;
-pub mod grid_coder;
-pub mod grid_shaping;
-pub mod half_range;
-pub mod kd_layout;
-pub mod octree_positions;
+pub mod grid_codecs;
+pub(crate) mod grid_coder;
+mod grid_shaping;
+mod half_range;
+mod kd_layout;
+mod octree_positions;
 mod quantiser;
 mod reader;
 mod records;

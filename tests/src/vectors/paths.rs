@@ -3,8 +3,8 @@
 //! `RDLT` codec 2 (§6.7), `RNTC` scope 1 (§6.6.3), deform model 1 (§6.4), `TFEA` codecs 1
 //! and 2 (§6.2). [`claims`] checks that each vector still takes its path.
 
-use dlgs::chunks::csog::adaptive_coder::{self, Mode, Previous};
-use dlgs::chunks::csog::grid_coder::{self, GridCodec};
+use dlgs::chunks::csog::grid_codecs::{self as grid_coder, GridCodec};
+use dlgs::chunks::csog::grid_codecs::{adaptive_encode, AdaptiveMode as Mode, Previous};
 use dlgs::chunks::csog::{self, grid_width, quantise_set, QuantBits};
 use dlgs::chunks::mlpw::WeightType;
 use dlgs::container::header::{DeformModel, ResidualMode};
@@ -91,7 +91,7 @@ fn adaptive(
     bits: u8,
     mode: Mode,
 ) -> (GridCodec, Vec<u8>) {
-    let d = adaptive_coder::encode(q, prev, p2, w, bits, mode).expect("a usable mode");
+    let d = adaptive_encode(q, prev, p2, w, bits, mode).expect("a usable mode");
     (GridCodec::Adaptive, d)
 }
 
