@@ -16,7 +16,7 @@ fn main() -> dlgs::Result<()> {
         .expect("usage: residual_timing FILE.dlgs");
     let mut dec = Decoder::open_path(&path)?;
     let scene = dec.scene().clone();
-    let limits = *dec.reader().limits();
+    let limits = dec.reader().limits().clone();
     let base = dec.gop_canonical(0)?;
     if std::env::args().nth(2).as_deref() == Some("eval") {
         return eval_only(&mut dec, &scene, &limits, &base);

@@ -14,7 +14,7 @@ fn main() -> dlgs::Result<()> {
     let out = args.next().expect(usage);
     let mut dec = Decoder::open_path(&path)?;
     let scene = dec.scene().clone();
-    let limits = *dec.reader().limits();
+    let limits = dec.reader().limits().clone();
     let chunks = dec.reader().gop_chunks(gop)?;
     let c = chunks
         .into_iter()

@@ -160,7 +160,7 @@ impl<R: Read + Seek> Decoder<R> {
         };
         let p = self.reader.payload(&c)?;
         let scene = self.reader.scene().clone();
-        let limits = *self.reader.limits();
+        let limits = self.reader.limits().fresh();
         laed::decode(&p, c.payload_offset(), &scene, &limits).map(Some)
     }
 
@@ -183,7 +183,7 @@ impl<R: Read + Seek> Decoder<R> {
         let chunks = self.reader.gop_chunks(g)?;
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
-        let limits = *self.reader.limits();
+        let limits = self.reader.limits().fresh();
         let hevc = self.hevc.clone();
         let reader = &mut self.reader;
         let payloads = build::dynamic_payloads(&scene, &chunks, gop_at, |c| reader.payload(c))?;
@@ -273,7 +273,7 @@ impl<R: Read + Seek> Decoder<R> {
         let chunks = self.reader.gop_chunks(g)?;
         let gop_at = self.reader.gop_entry(g)?.offset;
         let scene = self.reader.scene().clone();
-        let limits = *self.reader.limits();
+        let limits = self.reader.limits().fresh();
         let reader = &mut self.reader;
         build::state(&scene, &limits, &chunks, gop_at, base, |c| {
             reader.payload(c)

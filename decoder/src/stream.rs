@@ -42,7 +42,7 @@ impl<R: Read> StreamDecoder<R> {
 
     pub fn with_limits(src: R, limits: Limits) -> Result<Self> {
         let mut d = StreamDecoder {
-            stream: StreamReader::with_limits(src, limits)?,
+            stream: StreamReader::with_limits(src, limits.clone())?,
             limits,
             scene_chunks: Vec::new(),
             open: None,
@@ -81,7 +81,7 @@ impl<R: Read> StreamDecoder<R> {
         else {
             return Ok(None);
         };
-        laed::decode(p, c.payload_offset(), self.scene(), &self.limits).map(Some)
+        laed::decode(p, c.payload_offset(), self.scene(), &self.limits.fresh()).map(Some)
     }
 
     /// The next GOP in file order, decoded; `None` after the last GOP (the index and tail
@@ -165,7 +165,9 @@ impl<R: Read> StreamDecoder<R> {
                 .map(|(_, p)| std::mem::take(p))
                 .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(c.ty), c.offset))
         };
-        let state = build::state(&scene, &self.limits, &infos, gop_at, base, &mut payload)?;
+        // One budget for everything this GOP's chunks allocate.
+        let limits = self.limits.fresh();
+        let state = build::state(&scene, &limits, &infos, gop_at, base, &mut payload)?;
         if g == 0 {
             self.first = Some(state.clone());
         }
@@ -173,7 +175,7 @@ impl<R: Read> StreamDecoder<R> {
         let hevc = self.hevc.as_ref();
         let gop = build::gop(
             &scene,
-            &self.limits,
+            &limits,
             hevc,
             g,
             &infos,

@@ -493,7 +493,7 @@ pub fn read_next(dir: &Path, prev: &RefGop, limits: &Limits) -> Result<RefGop, I
 
 /// Read a whole run: GOP 0 then each following GOP on top of the previous one.
 /// Every file is read within `limits` (file sizes against `max_alloc`, Gaussian counts
-/// against `max_gaussians`).
+/// against `max_gaussians`); each GOP folder's files draw from one fresh budget.
 pub fn read_run(
     dirs: &[PathBuf],
     limits: &Limits,
@@ -503,6 +503,7 @@ pub fn read_run(
     for (g, d) in dirs.iter().enumerate() {
         // The compressed files win where both exist: they are what the reference's own
         // player decodes; the checkpoints hold the values before compression.
+        let limits = &limits.fresh();
         let gop = match (gops.last(), has_compressed(d)) {
             (None, true) => read_first(d, limits)?,
             (None, false) => checkpoint::read_first(d, limits)?,

@@ -145,7 +145,7 @@ fn limits_are_enforced_before_allocation() {
         max_chunk_len: 1000,
         ..Limits::tiny()
     };
-    let e = decode_all_random(&bytes, tight).unwrap_err();
+    let e = decode_all_random(&bytes, tight.clone()).unwrap_err();
     assert!(
         matches!(
             e,
@@ -171,7 +171,7 @@ fn limits_are_enforced_before_allocation() {
         max_gaussians: 1000,
         ..Limits::default()
     };
-    let e = decode_all_random(&bytes, few).unwrap_err();
+    let e = decode_all_random(&bytes, few.clone()).unwrap_err();
     assert!(
         matches!(
             e,
@@ -206,4 +206,68 @@ fn writer_refuses_misuse_and_encoder_refuses_nan() {
     g.log_scales[1][2] = f32::NAN;
     let e = dlgs_encoder::encode_still(&g, Default::default(), Vec::new()).unwrap_err();
     assert!(e.to_string().contains("log-scale of Gaussian 1"), "{e}");
+}
+
+/// Every GOP's chunks draw from one budget: a budget that holds one GOP's buffers decodes a
+/// file of many (a fresh budget per GOP), one smaller than a GOP's buffers stops it, and the
+/// foreign readers draw the file and its rows from the budget they are given.
+#[test]
+fn one_budget_per_gop_and_per_foreign_file() {
+    let g = load("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    let (bytes, want) = multi_gop_file(&g, 3, RawCodec::None);
+    // The CRAW body of one GOP (1,971 Gaussians, SH 3, raw f32).
+    let body = {
+        let mut r = FileReader::open(std::io::Cursor::new(&bytes)).unwrap();
+        let c = r.gop_chunks(0).unwrap()[0];
+        assert_eq!(c.ty, ChunkType::CRAW);
+        let p = r.payload(&c).unwrap();
+        let l = Limits::default();
+        dlgs::chunks::decode_canonical(c.ty, &p, c.payload_offset(), r.scene(), &l)
+            .unwrap()
+            .unwrap();
+        l.budget.spent()
+    };
+    assert!(
+        body > 0,
+        "a chunk decoder draws from the budget it is given"
+    );
+    let one_gop = Limits {
+        max_total_alloc: body + body / 2,
+        ..Limits::default()
+    };
+    assert!(
+        decode_all_random(&bytes, one_gop.clone()).unwrap() == want,
+        "3 GOPs of {body} bytes each within a {}-byte budget per GOP",
+        one_gop.max_total_alloc
+    );
+    assert!(decode_all_stream(&bytes, one_gop).unwrap() == want);
+    let short = Limits {
+        max_total_alloc: body / 2,
+        ..Limits::default()
+    };
+    for e in [
+        decode_all_random(&bytes, short.clone()).unwrap_err(),
+        decode_all_stream(&bytes, short).unwrap_err(),
+    ] {
+        assert!(
+            matches!(e, Error::Limit(LimitError { limit, .. }) if limit == body / 2),
+            "{e}"
+        );
+        assert!(e.to_string().contains("one budget"), "{e}");
+    }
+    // A PLY: its file size and then its vertex rows are drawn from the same budget.
+    let path = dlgs_tests::data("ply/gs3d-fork_lod3_tile_0_1971_sh3.ply");
+    let size = std::fs::metadata(&path).unwrap().len();
+    let l = Limits {
+        max_total_alloc: size + size / 2,
+        ..Limits::default()
+    };
+    let e = dlgs::interop::read_splat_file_with_limits(&path, &l).unwrap_err();
+    assert_eq!(e.name(), "LimitExceeded", "{e}");
+    let roomy = Limits {
+        max_total_alloc: 3 * size,
+        ..Limits::default()
+    };
+    dlgs::interop::read_splat_file_with_limits(&path, &roomy).unwrap();
+    assert!(roomy.budget.spent() >= 2 * size, "file and rows drawn");
 }

@@ -20,7 +20,7 @@ fn check_case(bytes: &[u8], want: &[dlgs::Canonical], what: &str) -> (bool, bool
     let limits = Limits::tiny();
     let mut accepted = [false; 2];
     for (k, r) in [
-        decode_all_random(bytes, limits),
+        decode_all_random(bytes, limits.clone()),
         decode_all_stream(bytes, limits),
     ]
     .into_iter()
