@@ -13,6 +13,7 @@ mod rd_cmd;
 mod rd_plot;
 mod scene_io;
 mod seek_cmd;
+mod sequence_cmd;
 mod synth_cmd;
 
 use std::path::PathBuf;
@@ -57,11 +58,14 @@ enum Cmd {
     /// order) or the scene folder holding them (lossless by default: decodes to the reference
     /// decoder's tensors). A GOP folder without `compression_info.csv` is read from its
     /// checkpoint (`model.pth`, GOP >= 1 `model_offset.pth`); where both exist the compressed
-    /// files win. `-h` lists the options by group; `--help` explains each.
+    /// files win. Several splat files, or a folder of them, are a sequence of frames (natural
+    /// order of names): matched frame to frame, fitted with key time features and decoders, and
+    /// written as a dynamic .dlgs (`--quality high` canonical by default). `-h` lists the
+    /// options by group; `--help` explains each.
     Encode {
         #[arg(required = true, num_args = 1..)]
         input: Vec<PathBuf>,
-        /// Frame rate of a reference run (the reference's N3DV videos: 30).
+        /// Frame rate of a reference run or a frame sequence (the reference's N3DV videos: 30).
         #[arg(long, default_value_t = 30)]
         fps: u32,
         #[arg(short, long)]
@@ -72,6 +76,8 @@ enum Cmd {
         residual_mode: Option<String>,
         #[command(flatten)]
         codec: encode_cmd::CodecArgs,
+        #[command(flatten)]
+        sequence: sequence_cmd::SequenceArgs,
     },
     /// Seek latency: decode the frame at random times, each from a freshly opened decoder
     /// (cold: nothing cached) and then in one decoder (warm caches), and print the timings.
@@ -228,13 +234,27 @@ fn main() -> Result<()> {
             output,
             residual_mode,
             codec,
+            sequence,
         } => {
-            if input.iter().all(|p| p.is_dir()) {
+            let seq_dir = matches!(input.as_slice(), [d] if sequence_cmd::is_sequence_dir(d));
+            if seq_dir || (input.len() > 1 && input.iter().all(|p| p.is_file())) {
+                sequence_cmd::run_sequence(
+                    &input,
+                    &output,
+                    &codec,
+                    fps,
+                    residual_mode.as_deref(),
+                    &sequence,
+                )
+            } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)
             } else if let [one] = input.as_slice() {
                 encode_cmd::run_encode(one, &output, &codec, residual_mode.as_deref())
             } else {
-                anyhow::bail!("several inputs must all be reference GOP folders")
+                anyhow::bail!(
+                    "several inputs must be all splat frame files (a sequence) or all reference \
+                     GOP folders"
+                )
             }
         }
         Cmd::Seek {

@@ -1,0 +1,354 @@
+//! `dlgs encode FRAME_FILES... | SEQ_DIR`: a sequence of per-frame splat scenes fitted into a
+//! dynamic .dlgs (`dlgs_encoder::sequence`), then checked against its source frames.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use dlgs_encoder::sequence::{self, SequenceReport, SequenceSettings};
+use dlgs_render::{metrics, render, RenderOptions};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::cameras_arg::CameraArgs;
+use crate::codec_args::{parse_residual_mode, CodecArgs};
+use crate::scene_io::Source;
+
+/// Options of per-frame sequences (several splat files, or a folder of them).
+#[derive(Args, Debug, Clone)]
+pub struct SequenceArgs {
+    /// Frames per GOP of a sequence.
+    #[arg(
+        help_heading = "Sequences (per-frame files)",
+        long,
+        default_value_t = 60
+    )]
+    pub gop_length: u32,
+    /// Frames between key time features of a sequence (divides --gop-length).
+    #[arg(
+        help_heading = "Sequences (per-frame files)",
+        long,
+        default_value_t = 10
+    )]
+    pub key_interval: u32,
+    /// Refuse a sequence when fewer than this share of Gaussians match confidently between
+    /// two consecutive frames (0-1).
+    #[arg(
+        help_heading = "Sequences (per-frame files)",
+        long,
+        default_value_t = 0.9
+    )]
+    pub min_confident: f64,
+    /// After encoding, decode every source frame's time and render it against the source
+    /// frame from 8 orbit cameras around frame 0 (`dlgs compare`'s defaults): mean and worst
+    /// PSNR over the frames.
+    #[arg(help_heading = "Sequences (per-frame files)", long)]
+    pub check: bool,
+    /// With --check: write the PSNR of every frame here (CSV: frame, file, psnr_db).
+    #[arg(help_heading = "Sequences (per-frame files)", long, value_name = "CSV")]
+    pub check_csv: Option<PathBuf>,
+}
+
+const SPLAT_EXTENSIONS: [&str; 4] = ["ply", "sog", "spz", "splat"];
+
+fn is_splat_file(p: &Path) -> bool {
+    p.is_file()
+        && p.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| SPLAT_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// A folder that holds splat frames directly (not a reference run's GOP folders).
+pub fn is_sequence_dir(p: &Path) -> bool {
+    p.is_dir()
+        && std::fs::read_dir(p).is_ok_and(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .filter(|e| is_splat_file(&e.path()))
+                .take(2)
+                .count()
+                == 2
+        })
+}
+
+/// Natural order: digit runs compare as numbers (`frame_9` before `frame_10`).
+fn natural_key(s: &str) -> Vec<(bool, String, u128)> {
+    let mut out = Vec::new();
+    let mut chars = s.chars().peekable();
+    while let Some(&c) = chars.peek() {
+        let digit = c.is_ascii_digit();
+        let mut run = String::new();
+        while let Some(&c) = chars.peek() {
+            if c.is_ascii_digit() != digit {
+                break;
+            }
+            run.push(c);
+            chars.next();
+        }
+        let n = if digit {
+            run.parse().unwrap_or(u128::MAX)
+        } else {
+            0
+        };
+        out.push((digit, if digit { String::new() } else { run }, n));
+    }
+    out
+}
+
+/// The frame files of the inputs: files as given (in natural order of their names), folders
+/// expanded to the splat files they hold.
+pub fn frame_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for p in inputs {
+        if p.is_dir() {
+            for e in std::fs::read_dir(p).with_context(|| format!("reading {}", p.display()))? {
+                let path = e?.path();
+                if is_splat_file(&path) {
+                    files.push(path);
+                }
+            }
+        } else {
+            files.push(p.clone());
+        }
+    }
+    files.sort_by_cached_key(|p| {
+        natural_key(
+            &p.file_name()
+                .map(|n| n.to_string_lossy().to_string())
+                .unwrap_or_default(),
+        )
+    });
+    if files.len() < 2 {
+        bail!(
+            "a sequence needs at least 2 frame files, found {}",
+            files.len()
+        );
+    }
+    Ok(files)
+}
+
+fn bar(len: usize, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}, {elapsed}")
+            .expect("static template"),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+pub fn run_sequence(
+    inputs: &[PathBuf],
+    output: &Path,
+    codec: &CodecArgs,
+    fps: u32,
+    residual_mode: Option<&str>,
+    seq: &SequenceArgs,
+) -> Result<()> {
+    if seq.check_csv.is_some() && !seq.check {
+        bail!("--check-csv writes what --check measures: give --check too");
+    }
+    let files = frame_files(inputs)?;
+    let started = std::time::Instant::now();
+    let pb = bar(files.len(), "reading frames");
+    let mut frames = Vec::with_capacity(files.len());
+    let mut in_bytes = 0u64;
+    for (t, f) in files.iter().enumerate() {
+        let g = dlgs::interop::read_splat_file(f)
+            .with_context(|| format!("frame {t} ({})", f.display()))?;
+        in_bytes += std::fs::metadata(f).map(|m| m.len()).unwrap_or(0);
+        frames.push(g);
+        pb.set_position(t as u64 + 1);
+    }
+    pb.finish_and_clear();
+    let settings = SequenceSettings {
+        fps_num: fps,
+        fps_den: 1,
+        gop_length: seq.gop_length,
+        key_interval: seq.key_interval,
+        min_confident: seq.min_confident,
+        residual_mode: match residual_mode {
+            Some(m) => parse_residual_mode(m)?,
+            None => SequenceSettings::default().residual_mode,
+        },
+    };
+    let pb = bar(files.len(), "matching frames");
+    let mut stage = String::new();
+    let (model, report) = sequence::build(frames, &settings, &mut |what, done, total| {
+        if what != stage {
+            stage = what.to_owned();
+            pb.set_message(stage.clone());
+            pb.set_length(total as u64);
+        }
+        pb.set_position(done as u64);
+    })
+    .map_err(|e| {
+        // Say which file a frame number is.
+        anyhow::anyhow!("{e}").context(format!(
+            "{} frames from {}",
+            files.len(),
+            files[0].display()
+        ))
+    })?;
+    pb.finish_and_clear();
+    let fit_seconds = started.elapsed().as_secs_f64();
+    let codec = codec.defaulting_quality("high");
+    let meta = serde_json::json!({
+        "source": format!("{} per-frame files, {} .. {}", files.len(),
+            files[0].file_name().unwrap_or_default().to_string_lossy(),
+            files[files.len() - 1].file_name().unwrap_or_default().to_string_lossy()),
+        "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
+        "settings": codec.changed_settings(),
+        "sequence": { "gop_length": seq.gop_length, "key_interval": seq.key_interval },
+    });
+    let cfg = codec.config(meta)?;
+    let pb = ProgressBar::new_spinner();
+    pb.set_message(format!("coding {} GOPs", model.gops.len()));
+    pb.enable_steady_tick(std::time::Duration::from_millis(200));
+    let bytes = sequence::write(&model, cfg, Vec::new())?;
+    pb.finish_and_clear();
+    std::fs::write(output, &bytes).with_context(|| format!("writing {}", output.display()))?;
+    print_report(
+        &report,
+        &files,
+        fit_seconds,
+        started.elapsed().as_secs_f64(),
+    );
+    println!(
+        "{} -> {}: {} bytes ({:.1}% of the frames' {in_bytes} bytes), {:.0} bytes/frame",
+        inputs[0].display(),
+        output.display(),
+        bytes.len(),
+        100.0 * bytes.len() as f64 / in_bytes.max(1) as f64,
+        bytes.len() as f64 / files.len() as f64
+    );
+    if seq.check {
+        let cams = CameraArgs {
+            cameras: None,
+            view: None,
+            orbit: 8,
+            width: None,
+            height: None,
+            up: "-y".into(),
+            distance: 1.6,
+        };
+        check(output, &files, fps, &cams, seq.check_csv.as_deref())?;
+    }
+    Ok(())
+}
+
+fn print_report(r: &SequenceReport, files: &[PathBuf], fit_s: f64, total_s: f64) {
+    println!(
+        "{} frames of {} Gaussians: {} static, {} dynamic; matched, fitted in {fit_s:.1} s, \
+         coded in {:.1} s",
+        r.frames,
+        r.gaussians,
+        r.n_static,
+        r.n_dynamic,
+        total_s - fit_s
+    );
+    if let Some(w) = r.worst_pair() {
+        let mean = r.pairs.iter().map(|p| p.confident_share).sum::<f64>() / r.pairs.len() as f64;
+        println!(
+            "correspondence: {:.2}% confident matches on average, worst {:.2}% ({} -> {}), \
+             largest move {:.3e}",
+            100.0 * mean,
+            100.0 * w.confident_share,
+            files[w.frame - 1]
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy(),
+            files[w.frame]
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy(),
+            r.pairs
+                .iter()
+                .map(|p| p.max_distance)
+                .fold(0.0f32, f32::max)
+        );
+    }
+    for (g, f) in r.gops.iter().enumerate() {
+        println!(
+            "  GOP {g}: position fit RMS {:.2e}, shared channels hold {:.4}% of the rotation/\
+             scale/colour/opacity offsets{}",
+            f.position_rms,
+            100.0 * f.shared_energy_kept,
+            if f.scale_offsets { ", scales move" } else { "" }
+        );
+    }
+}
+
+/// Decode the file at every source frame's time and render both from the same cameras.
+fn check(
+    output: &Path,
+    files: &[PathBuf],
+    fps: u32,
+    cams: &CameraArgs,
+    csv: Option<&Path>,
+) -> Result<()> {
+    let mut dec = Source::open(output)?;
+    let first = dlgs::interop::read_splat_file(&files[0])?;
+    let cameras = cams.resolve(&first)?;
+    let opts = RenderOptions {
+        background: [1.0, 1.0, 1.0],
+        features: false,
+    };
+    let pb = bar(files.len(), "checking frames");
+    let mut per_frame = Vec::with_capacity(files.len());
+    let mut decode_s = 0.0;
+    for (t, f) in files.iter().enumerate() {
+        let src = dlgs::interop::read_splat_file(f)?;
+        let time = t as f64 / fps as f64;
+        let mut psnr = 0.0;
+        for cam in &cameras {
+            let started = std::time::Instant::now();
+            let got = dec.at(time, cam.position.to_array(), false)?;
+            decode_s += started.elapsed().as_secs_f64();
+            let a = render(&src, cam, &opts).map_err(anyhow::Error::msg)?;
+            let b = render(&got, cam, &opts).map_err(anyhow::Error::msg)?;
+            psnr += metrics::psnr(&a.color, &b.color).min(100.0);
+        }
+        per_frame.push(psnr / cameras.len() as f64);
+        pb.set_position(t as u64 + 1);
+    }
+    pb.finish_and_clear();
+    if let Some(csv) = csv {
+        let mut out = String::from("frame,file,psnr_db\n");
+        for (t, (p, f)) in per_frame.iter().zip(files).enumerate() {
+            let name = f.file_name().unwrap_or_default().to_string_lossy();
+            out.push_str(&format!("{t},{name},{p:.3}\n"));
+        }
+        std::fs::write(csv, out).with_context(|| format!("writing {}", csv.display()))?;
+    }
+    let mean = per_frame.iter().sum::<f64>() / per_frame.len() as f64;
+    let (worst_t, worst) = per_frame
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(t, &p)| (t, p))
+        .unwrap_or((0, 0.0));
+    println!(
+        "check against the {} source frames ({} cameras each, PSNR capped at 100 dB): mean \
+         {mean:.2} dB, worst {worst:.2} dB (frame {worst_t}, {}); {:.2} ms per decoded frame",
+        files.len(),
+        cameras.len(),
+        files[worst_t]
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy(),
+        1e3 * decode_s / (files.len() * cameras.len()) as f64
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_sort_naturally() {
+        let mut names = ["f10.ply", "f9.ply", "f100.ply", "f1.ply", "g0.ply"];
+        names.sort_by_cached_key(|n| natural_key(n));
+        assert_eq!(names, ["f1.ply", "f9.ply", "f10.ply", "f100.ply", "g0.ply"]);
+    }
+}

@@ -1,0 +1,286 @@
+//! Real motion: a sequence of per-frame splat scenes (one file per frame) encoded as a dynamic
+//! `.dlgs` by fitting DLGStream's deformation field to it.
+//!
+//! 1. [`correspondence`]: consecutive frames are matched one to one (they may be sorted
+//!    independently), so every Gaussian becomes a track through the sequence;
+//! 2. the tracks are split into static and dynamic Gaussians by how much they change within
+//!    any GOP ([`is_dynamic`]);
+//! 3. [`fit`]: per GOP, the canonical state is the GOP's first frame and the key time features
+//!    and decoders are fitted to every frame of the GOP;
+//! 4. the result is a model like any other: [`write`] codes it with the stream encoder
+//!    (canonical coding, HEVC time features, residuals between GOPs).
+
+pub mod correspondence;
+pub mod fit;
+mod linalg;
+
+use dlgs::container::header::ResidualMode;
+use dlgs::container::SceneHeader;
+use dlgs::model::{Canonical, DynamicGop, Gaussians};
+use dlgs::{Error, Result};
+
+pub use correspondence::{match_frames, FrameMatch};
+pub use fit::GopFit;
+
+/// How a sequence is cut and fitted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SequenceSettings {
+    pub fps_num: u32,
+    pub fps_den: u32,
+    /// Frames per GOP.
+    pub gop_length: u32,
+    /// Frames between key time features (divides `gop_length`).
+    pub key_interval: u32,
+    /// Refuse the sequence if a pair of consecutive frames matches with fewer confident matches
+    /// than this share (see [`correspondence`]).
+    pub min_confident: f64,
+    /// How GOPs after the first carry their canonical state.
+    pub residual_mode: ResidualMode,
+}
+
+impl Default for SequenceSettings {
+    fn default() -> Self {
+        SequenceSettings {
+            fps_num: 30,
+            fps_den: 1,
+            gop_length: 60,
+            key_interval: 10,
+            min_confident: 0.9,
+            residual_mode: ResidualMode::Sequential,
+        }
+    }
+}
+
+/// One pair of consecutive frames as matched.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PairReport {
+    /// The later frame of the pair (0-based).
+    pub frame: usize,
+    pub confident_share: f64,
+    pub mutual_share: f64,
+    pub max_distance: f32,
+}
+
+/// What building the model found, for the user.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct SequenceReport {
+    pub frames: usize,
+    pub gaussians: usize,
+    pub n_static: usize,
+    pub n_dynamic: usize,
+    pub pairs: Vec<PairReport>,
+    pub gops: Vec<GopFit>,
+}
+
+impl SequenceReport {
+    /// The least confident pair of frames.
+    pub fn worst_pair(&self) -> Option<&PairReport> {
+        self.pairs
+            .iter()
+            .min_by(|a, b| a.confident_share.total_cmp(&b.confident_share))
+    }
+}
+
+/// A fitted sequence: the scene header and, per GOP, its canonical state and deformation field.
+#[derive(Debug, Clone)]
+pub struct SequenceModel {
+    pub scene: SceneHeader,
+    pub gops: Vec<(Canonical, DynamicGop)>,
+}
+
+/// Progress of [`build`]: (stage, done, total).
+pub type Progress<'a> = &'a mut dyn FnMut(&str, usize, usize);
+
+/// Match frame `t` onto the previous one and put it in track order (`Gaussian i` of the result
+/// continues Gaussian i of the previous frame's result).
+fn into_track_order(
+    prev: &Gaussians,
+    frame: &Gaussians,
+    t: usize,
+    s: &SequenceSettings,
+) -> Result<(Gaussians, PairReport)> {
+    let m = match_frames(&prev.positions, &frame.positions)
+        .map_err(|e| Error::input(format!("frame {t}: {e}; a .dlgs keeps one Gaussian count")))?;
+    if m.confident_share() < s.min_confident {
+        return Err(Error::input(format!(
+            "frames {} and {t}: only {:.1}% of the Gaussians match confidently (at least {:.1}% \
+             asked): the motion between frames is comparable to the spacing between Gaussians \
+             (give frames closer in time, or lower the floor knowing matches may be wrong)",
+            t - 1,
+            100.0 * m.confident_share(),
+            100.0 * s.min_confident
+        )));
+    }
+    let mut next_of = vec![0usize; frame.len()];
+    for (j, &p) in m.prev_of.iter().enumerate() {
+        next_of[p as usize] = j;
+    }
+    let mut out = Gaussians::new(frame.sh_degree, frame.lang_width);
+    for &j in &next_of {
+        out.push_from(frame, j);
+    }
+    let report = PairReport {
+        frame: t,
+        confident_share: m.confident_share(),
+        mutual_share: m.mutual as f64 / frame.len().max(1) as f64,
+        max_distance: m.max_distance,
+    };
+    Ok((out, report))
+}
+
+/// Whether a track changes visibly within a GOP: its position by more than a tenth of its
+/// size (largest axis) or 1e-5 of the scene, its colour by more than 1/255 in any channel
+/// (SH DC), its rotation by more than ~0.2°, its log-scale or opacity by more than 0.01.
+pub fn is_dynamic(frames: &[&Gaussians], i: usize, scene_size: f32) -> bool {
+    let f0 = frames[0];
+    let size = f0.log_scales[i]
+        .iter()
+        .fold(f32::NEG_INFINITY, |a, &b| a.max(b))
+        .exp();
+    let tol = (0.1 * size).max(1e-5 * scene_size);
+    let stride = f0.sh_stride();
+    let q0 = f0.rotations[i];
+    let n0 = q0.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+    frames[1..].iter().any(|f| {
+        let p = f.positions[i];
+        let moved = (0..3)
+            .map(|a| (p[a] - f0.positions[i][a]).powi(2))
+            .sum::<f32>()
+            .sqrt();
+        let q = f.rotations[i];
+        let n = q.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
+        let dot = (0..4).map(|c| q[c] * q0[c]).sum::<f32>().abs() / (n * n0);
+        moved > tol
+            || (0..3).any(|c| {
+                (f.sh[i * stride + c] - f0.sh[i * stride + c]).abs() * 0.282_095 > 1.0 / 255.0
+            })
+            || dot < 0.999_998
+            || (0..3).any(|a| (f.log_scales[i][a] - f0.log_scales[i][a]).abs() > 0.01)
+            || (f.opacity[i] - f0.opacity[i]).abs() > 0.01
+    })
+}
+
+/// Build the model of a sequence of frames (equal Gaussian counts, any sort order).
+pub fn build(
+    frames: Vec<Gaussians>,
+    s: &SequenceSettings,
+    progress: Progress,
+) -> Result<(SequenceModel, SequenceReport)> {
+    if frames.len() < 2 {
+        return Err(Error::input(format!(
+            "a sequence needs at least 2 frames, got {}",
+            frames.len()
+        )));
+    }
+    if s.key_interval == 0 || s.gop_length == 0 || !s.gop_length.is_multiple_of(s.key_interval) {
+        return Err(Error::input(format!(
+            "the key interval ({}) must divide the GOP length ({})",
+            s.key_interval, s.gop_length
+        )));
+    }
+    if s.gop_length / s.key_interval < 1 {
+        return Err(Error::input("a GOP needs at least two keys"));
+    }
+    for (t, f) in frames.iter().enumerate() {
+        f.check_shapes()
+            .and_then(|_| f.check_finite())
+            .map_err(|e| Error::input(format!("frame {t}: {e}")))?;
+        if f.sh_degree != frames[0].sh_degree {
+            return Err(Error::input(format!(
+                "frame {t} has SH degree {}, frame 0 has {}",
+                f.sh_degree, frames[0].sh_degree
+            )));
+        }
+        if f.lang_width != 0 {
+            return Err(Error::input(format!(
+                "frame {t} carries language features; sequences are fitted without language"
+            )));
+        }
+    }
+    let total = frames.len();
+    let mut tracked: Vec<Gaussians> = Vec::with_capacity(total);
+    let mut report = SequenceReport {
+        frames: total,
+        gaussians: frames[0].len(),
+        ..Default::default()
+    };
+    for (t, f) in frames.into_iter().enumerate() {
+        if t == 0 {
+            tracked.push(f);
+        } else {
+            let (g, pair) = into_track_order(&tracked[t - 1], &f, t, s)?;
+            tracked.push(g);
+            report.pairs.push(pair);
+        }
+        progress("matching frames", t + 1, total);
+    }
+    let l = s.gop_length as usize;
+    let gop_count = total.div_ceil(l);
+    // The frames of GOP g: its own and the next GOP's first (the last key's anchor).
+    let gop_frames = |g: usize| -> Vec<&Gaussians> {
+        tracked[g * l..((g + 1) * l + 1).min(total)]
+            .iter()
+            .collect()
+    };
+    let scene_size = tracked[0]
+        .bounds()
+        .map(|(lo, hi)| (0..3).map(|a| hi[a] - lo[a]).fold(0.0f32, f32::max))
+        .unwrap_or(0.0);
+    let n = tracked[0].len();
+    let dynamic: Vec<bool> = (0..n)
+        .map(|i| (0..gop_count).any(|g| is_dynamic(&gop_frames(g), i, scene_size)))
+        .collect();
+    let dyn_ids: Vec<usize> = (0..n).filter(|&i| dynamic[i]).collect();
+    let static_ids: Vec<usize> = (0..n).filter(|&i| !dynamic[i]).collect();
+    report.n_static = static_ids.len();
+    report.n_dynamic = dyn_ids.len();
+    let sh_degree = tracked[0].sh_degree;
+    let scene = SceneHeader {
+        residual_mode: s.residual_mode,
+        deform_model: fit::DEFORM_MODEL,
+        time_channels: if dyn_ids.is_empty() {
+            0
+        } else {
+            fit::CHANNELS as u8
+        },
+        fps_num: s.fps_num,
+        fps_den: s.fps_den,
+        gop_length: s.gop_length,
+        key_interval: s.key_interval,
+        gop_count: gop_count as u32,
+        frame_count: total as u32,
+        n_static: static_ids.len() as u32,
+        n_dynamic: dyn_ids.len() as u32,
+        ..SceneHeader::still(static_ids.len() as u32, sh_degree)
+    };
+    let mut gops = Vec::with_capacity(gop_count);
+    for g in 0..gop_count {
+        let fr = gop_frames(g);
+        let mut statics = Gaussians::new(sh_degree, 0);
+        for &i in &static_ids {
+            statics.push_from(fr[0], i);
+        }
+        let (dynamics, field, fit) = fit::fit_gop(&fr, &dyn_ids, l, s.key_interval as usize);
+        gops.push((Canonical { statics, dynamics }, field));
+        report.gops.push(fit);
+        progress("fitting GOPs", g + 1, gop_count);
+    }
+    Ok((SequenceModel { scene, gops }, report))
+}
+
+/// Code a fitted sequence with the stream encoder.
+pub fn write<W: std::io::Write>(
+    model: &SequenceModel,
+    cfg: crate::EncoderConfig,
+    out: W,
+) -> Result<W> {
+    let mut enc = crate::StreamEncoder::new(out, model.scene.clone(), cfg)?;
+    let dynamic = model.scene.n_dynamic > 0;
+    for (canonical, field) in &model.gops {
+        enc.push(
+            crate::GopCanonical::State(canonical),
+            dynamic.then_some(field),
+        )?;
+    }
+    enc.finish()
+}
