@@ -268,10 +268,18 @@ fn print_report(r: &SequenceReport, files: &[PathBuf], fit_s: f64, total_s: f64)
         );
     }
     for (g, f) in r.gops.iter().enumerate() {
+        let (worst_u, worst) = f
+            .frame_position_rms
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(u, &e)| (u, e))
+            .unwrap_or((0, 0.0));
         println!(
-            "  GOP {g}: position fit RMS {:.2e}, shared channels hold {:.4}% of the rotation/\
-             scale/colour/opacity offsets{}",
+            "  GOP {g}: position fit RMS {:.2e} (worst frame {} at {worst:.2e}), shared channels \
+             hold {:.4}% of the rotation/scale/colour/opacity offsets{}",
             f.position_rms,
+            g * r.gop_length + worst_u,
             100.0 * f.shared_energy_kept,
             if f.scale_offsets { ", scales move" } else { "" }
         );

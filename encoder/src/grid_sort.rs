@@ -260,11 +260,16 @@ fn pass(
 /// The grid order: `order[cell] = index of the Gaussian placed there`, cells row-major in a
 /// [`grid_width`]-wide grid.
 pub fn grid_order(g: &Gaussians, spec: SortSpec) -> Vec<u32> {
+    grid_order_with_width(g, spec, grid_width(g.len()))
+}
+
+/// [`grid_order`] for a grid `width` cells wide (e.g. the tiles of the time features, §6.2).
+pub fn grid_order_with_width(g: &Gaussians, spec: SortSpec, width: usize) -> Vec<u32> {
     let n = g.len();
     if n == 0 {
         return Vec::new();
     }
-    let width = grid_width(n);
+    let width = width.clamp(1, n);
     let height = n.div_ceil(width);
     let f = features(g);
     let mut idx: Vec<u32> = (0..n as u32).collect();

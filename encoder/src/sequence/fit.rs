@@ -41,6 +41,9 @@ const MAX_OPACITY_STEP: f64 = 0.99;
 pub struct GopFit {
     /// Root-mean-square position error over every dynamic Gaussian and frame of the fit.
     pub position_rms: f64,
+    /// The same per local frame of the GOP (the next GOP's first frame, which the last key
+    /// also fits, is not listed: it is that GOP's frame 0).
+    pub frame_position_rms: Vec<f64>,
     /// Share of the shared offsets' energy that the six shared channels hold (1 = all).
     pub shared_energy_kept: f64,
     /// Whether log-scales change within the GOP (then the decoder applies them).
@@ -118,9 +121,18 @@ fn single_layer(role: MlpRole, outputs: usize, weights: Vec<f64>) -> Mlp {
     }
 }
 
+/// The local frame whose Gaussians are the GOP's canonical state: the middle of the GOP's own
+/// frames, so that the offsets the time features carry are about half as large as from its
+/// first frame (the 12-bit features lose a share of their range, and HEVC more on busier
+/// pictures).
+pub fn canonical_frame(frames: usize, gop_length: usize) -> usize {
+    frames.min(gop_length).saturating_sub(1) / 2
+}
+
 /// Fit one GOP. `frames[u]` is local frame `u` (0 ..= at most `gop_length`, the last being the
 /// next GOP's first frame when there is one), all in track order; `ids` are the dynamic
-/// Gaussians. Returns their canonical state (frame 0's, rotations normalised) and the field.
+/// Gaussians. Returns their canonical state (that of [`canonical_frame`], rotations
+/// normalised) and the field.
 pub fn fit_gop(
     frames: &[&Gaussians],
     ids: &[usize],
@@ -128,7 +140,7 @@ pub fn fit_gop(
     key_interval: usize,
 ) -> (Gaussians, DynamicGop, GopFit) {
     let keys = gop_length / key_interval + 1;
-    let first = frames[0];
+    let first = frames[canonical_frame(frames.len(), gop_length)];
     let mut canon = Gaussians::new(first.sh_degree, 0);
     for &i in ids {
         canon.push_from(first, i);
@@ -173,6 +185,7 @@ pub fn fit_gop(
     let mut features = TimeFeatures::zeros(n, keys, CHANNELS);
     let mut shared = vec![[0.0f64; SHARED_DIMS]; n * keys];
     let mut sq_err = 0.0f64;
+    let mut frame_sq = vec![0.0f64; frames.len()];
     let mut scale_moves = false;
     for (row, &i) in ids.iter().enumerate() {
         let xc = canon.positions[row];
@@ -190,7 +203,9 @@ pub fn fit_gop(
             }
             for (u, r) in herm.iter().enumerate() {
                 let fit: f64 = r.iter().map(|&(j, w)| w * z[j]).sum();
-                sq_err += (fit - (frames[u].positions[i][a] - xc[a]) as f64).powi(2);
+                let e = (fit - (frames[u].positions[i][a] - xc[a]) as f64).powi(2);
+                sq_err += e;
+                frame_sq[u] += e;
             }
         }
         let qc = unit_quat(canon.rotations[row]);
@@ -278,8 +293,13 @@ pub fn fit_gop(
         lang: None,
         scale_offsets: scale_moves,
     };
+    let own = frames.len().min(gop_length);
     let fit = GopFit {
         position_rms: (sq_err / (3 * n * frames.len()).max(1) as f64).sqrt(),
+        frame_position_rms: frame_sq[..own]
+            .iter()
+            .map(|e| (e / (3 * n).max(1) as f64).sqrt())
+            .collect(),
         shared_energy_kept: if total > 0.0 { kept / total } else { 1.0 },
         scale_offsets: scale_moves,
     };

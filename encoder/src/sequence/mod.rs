@@ -5,8 +5,8 @@
 //!    independently), so every Gaussian becomes a track through the sequence;
 //! 2. the tracks are split into static and dynamic Gaussians by how much they change within
 //!    any GOP ([`is_dynamic`]);
-//! 3. [`fit`]: per GOP, the canonical state is the GOP's first frame and the key time features
-//!    and decoders are fitted to every frame of the GOP;
+//! 3. [`fit`]: per GOP, the canonical state is the GOP's middle frame and the key time
+//!    features and decoders are fitted to every frame of the GOP;
 //! 4. the result is a model like any other: [`write`] codes it with the stream encoder
 //!    (canonical coding, HEVC time features, residuals between GOPs).
 
@@ -46,7 +46,7 @@ impl Default for SequenceSettings {
             gop_length: 60,
             key_interval: 10,
             min_confident: 0.9,
-            residual_mode: ResidualMode::Sequential,
+            residual_mode: ResidualMode::Intra,
         }
     }
 }
@@ -65,6 +65,7 @@ pub struct PairReport {
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct SequenceReport {
     pub frames: usize,
+    pub gop_length: usize,
     pub gaussians: usize,
     pub n_static: usize,
     pub n_dynamic: usize,
@@ -201,6 +202,7 @@ pub fn build(
     let mut tracked: Vec<Gaussians> = Vec::with_capacity(total);
     let mut report = SequenceReport {
         frames: total,
+        gop_length: s.gop_length as usize,
         gaussians: frames[0].len(),
         ..Default::default()
     };
@@ -230,7 +232,22 @@ pub fn build(
     let dynamic: Vec<bool> = (0..n)
         .map(|i| (0..gop_count).any(|g| is_dynamic(&gop_frames(g), i, scene_size)))
         .collect();
-    let dyn_ids: Vec<usize> = (0..n).filter(|&i| dynamic[i]).collect();
+    let mut dyn_ids: Vec<usize> = (0..n).filter(|&i| dynamic[i]).collect();
+    // Dynamic Gaussians are stored in the order the time-feature tiles show them (row by row,
+    // `side` wide, §6.2): a k-d layout of frame 0's positions on that grid makes neighbouring
+    // pixels neighbouring Gaussians, smooth pictures that HEVC codes far better.
+    let side = dlgs::chunks::tfea::Tiling::for_count(
+        dyn_ids.len(),
+        (s.gop_length / s.key_interval + 1) as usize,
+        fit::CHANNELS,
+    )
+    .side;
+    let mut first = Gaussians::new(tracked[0].sh_degree, 0);
+    for &i in &dyn_ids {
+        first.push_from(&tracked[0], i);
+    }
+    let order = crate::grid_sort::grid_order_with_width(&first, crate::SortSpec::NONE, side);
+    dyn_ids = order.iter().map(|&o| dyn_ids[o as usize]).collect();
     let static_ids: Vec<usize> = (0..n).filter(|&i| !dynamic[i]).collect();
     report.n_static = static_ids.len();
     report.n_dynamic = dyn_ids.len();
@@ -257,8 +274,9 @@ pub fn build(
     for g in 0..gop_count {
         let fr = gop_frames(g);
         let mut statics = Gaussians::new(sh_degree, 0);
+        let canonical = fr[fit::canonical_frame(fr.len(), l)];
         for &i in &static_ids {
-            statics.push_from(fr[0], i);
+            statics.push_from(canonical, i);
         }
         let (dynamics, field, fit) = fit::fit_gop(&fr, &dyn_ids, l, s.key_interval as usize);
         gops.push((Canonical { statics, dynamics }, field));

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Real motion (issue 52): encode the 200-frame PlayCanvas SOG sequence at several settings and
+# check every frame against its source (8 orbit cameras per frame): one CSV row per setting.
+# Usage: scripts/sequence_rd.sh [OUT_DIR]   (~75 s per setting on 2 cores)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-target/sequence_rd}
+DATA=${DLGS_DATA:-../shared/data}/sequence/playcanvas_wave_200f
+mkdir -p "$OUT"
+cargo build --release -q -p dlgs-cli
+B=target/release/dlgs
+echo "setting,bytes,bytes_per_frame,mean_psnr_db,worst_psnr_db,encode_s" > "$OUT/rd.csv"
+run() {
+  local name=$1; shift
+  local log
+  log=$(RUST_BACKTRACE=0 $B encode "$DATA" -o "$OUT/$name.dlgs" "$@" --check \
+    --check-csv "$OUT/$name.frames.csv" 2>&1)
+  local bytes; bytes=$(stat -c %s "$OUT/$name.dlgs")
+  local mean worst fit coded
+  mean=$(echo "$log" | sed -n 's/.*mean \([0-9.]*\) dB.*/\1/p')
+  worst=$(echo "$log" | sed -n 's/.*worst \([0-9.]*\) dB.*/\1/p')
+  fit=$(echo "$log" | sed -n 's/.*fitted in \([0-9.]*\) s.*/\1/p')
+  coded=$(echo "$log" | sed -n 's/.*coded in \([0-9.]*\) s.*/\1/p')
+  echo "$name,$bytes,$((bytes / 200)),$mean,$worst,$(echo "$fit + $coded" | bc)" | tee -a "$OUT/rd.csv"
+}
+run "crf6_k10" 
+run "crf2_k10" --crf 2
+run "crf4_k10" --crf 4
+run "crf10_k10" --crf 10
+run "crf6_k5" --key-interval 5
+run "crf6_k20" --key-interval 20
+run "crf6_k10_sequential_rdlt" --residual-mode sequential
+run "lossless_features" --lossless-features
+
+# Per-frame CSOG (our still coding of each frame, `--quality high`, the default) for the same
+# table: bytes of every frame's file and its PSNR against the source frame on the same 8 orbit
+# cameras (`dlgs compare`). PERFRAME=0 skips it (~5 min).
+if [ "${PERFRAME:-1}" = 1 ]; then
+  mkdir -p "$OUT/perframe"
+  echo "frame,bytes,psnr_db" > "$OUT/perframe.csv"
+  for f in "$DATA"/wave_*.sog; do
+    n=$(basename "$f" .sog)
+    RUST_BACKTRACE=0 $B encode "$f" -o "$OUT/perframe/$n.dlgs" > /dev/null
+    psnr=$(RUST_BACKTRACE=0 $B compare "$f" "$OUT/perframe/$n.dlgs" --json \
+      | python3 -c 'import json,sys; v=json.load(sys.stdin); print(sum(100 if x["psnr"] is None else min(x["psnr"], 100) for x in v["views"])/len(v["views"]))')
+    echo "$n,$(stat -c %s "$OUT/perframe/$n.dlgs"),$psnr" >> "$OUT/perframe.csv"
+  done
+  python3 - "$OUT/perframe.csv" <<'PY' | tee -a "$OUT/rd.csv"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+b = sum(int(r["bytes"]) for r in rows)
+p = [float(r["psnr_db"]) for r in rows]
+print(f"perframe_csog_high,{b},{b // len(rows)},{sum(p)/len(p):.2f},{min(p):.2f},")
+PY
+fi
