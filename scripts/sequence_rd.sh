@@ -32,24 +32,27 @@ run "crf6_k20" --key-interval 20
 run "crf6_k10_sequential_rdlt" --residual-mode sequential
 run "lossless_features" --lossless-features
 
-# Per-frame CSOG (our still coding of each frame, `--quality high`, the default) for the same
-# table: bytes of every frame's file and its PSNR against the source frame on the same 8 orbit
-# cameras (`dlgs compare`). PERFRAME=0 skips it (~5 min).
+# Per-frame CSOG (our still coding of each frame) at each quality of PERFRAME_QUALITIES (default
+# "high low": `high` is the still default, `low` lands near the sequence's PSNR): bytes of every
+# frame's file and its PSNR against the source frame on the same 8 orbit cameras (`dlgs
+# compare`). PERFRAME=0 skips it (~4 min per quality).
 if [ "${PERFRAME:-1}" = 1 ]; then
-  mkdir -p "$OUT/perframe"
-  echo "frame,bytes,psnr_db" > "$OUT/perframe.csv"
-  for f in "$DATA"/wave_*.sog; do
-    n=$(basename "$f" .sog)
-    RUST_BACKTRACE=0 $B encode "$f" -o "$OUT/perframe/$n.dlgs" > /dev/null
-    psnr=$(RUST_BACKTRACE=0 $B compare "$f" "$OUT/perframe/$n.dlgs" --json \
-      | python3 -c 'import json,sys; v=json.load(sys.stdin); print(sum(100 if x["psnr"] is None else min(x["psnr"], 100) for x in v["views"])/len(v["views"]))')
-    echo "$n,$(stat -c %s "$OUT/perframe/$n.dlgs"),$psnr" >> "$OUT/perframe.csv"
-  done
-  python3 - "$OUT/perframe.csv" <<'PY' | tee -a "$OUT/rd.csv"
+  for q in ${PERFRAME_QUALITIES:-high low}; do
+    mkdir -p "$OUT/perframe_$q"
+    echo "frame,bytes,psnr_db" > "$OUT/perframe_$q.csv"
+    for f in "$DATA"/wave_*.sog; do
+      n=$(basename "$f" .sog)
+      RUST_BACKTRACE=0 $B encode "$f" -o "$OUT/perframe_$q/$n.dlgs" --quality "$q" > /dev/null
+      psnr=$(RUST_BACKTRACE=0 $B compare "$f" "$OUT/perframe_$q/$n.dlgs" --json \
+        | python3 -c 'import json,sys; v=json.load(sys.stdin); print(sum(100 if x["psnr"] is None else min(x["psnr"], 100) for x in v["views"])/len(v["views"]))')
+      echo "$n,$(stat -c %s "$OUT/perframe_$q/$n.dlgs"),$psnr" >> "$OUT/perframe_$q.csv"
+    done
+    python3 - "$OUT/perframe_$q.csv" "$q" <<'PY' | tee -a "$OUT/rd.csv"
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 b = sum(int(r["bytes"]) for r in rows)
 p = [float(r["psnr_db"]) for r in rows]
-print(f"perframe_csog_high,{b},{b // len(rows)},{sum(p)/len(p):.2f},{min(p):.2f},")
+print(f"perframe_csog_{sys.argv[2]},{b},{b // len(rows)},{sum(p)/len(p):.2f},{min(p):.2f},")
 PY
+  done
 fi

@@ -41,6 +41,7 @@ pub fn read_spz(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         .take(limits.max_alloc)
         .read_to_end(&mut raw)
         .map_err(|e| Error::foreign("SPZ", format!("gzip: {e}")))?;
+    limits.check_alloc("SPZ decompressed", raw.len() as u64, 0)?;
     if raw.len() < 16 {
         return Err(Error::foreign("SPZ", "header truncated"));
     }
@@ -118,26 +119,27 @@ fn read_v4(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         u32at(16) as usize,
     );
     check_header(degree, frac)?;
-    if streams_n != 6 {
+    // Six streams; writers may leave out the SH stream when there is no SH beyond DC
+    // (`@playcanvas/splat-transform` does for degree 0).
+    if !(streams_n == 6 || (streams_n == 5 && degree == 0)) {
         return Err(Error::foreign(
             "SPZ",
-            format!("{streams_n} streams; v4 defines 6"),
+            format!("{streams_n} streams; v4 defines 6 (5 without SH bands)"),
         ));
     }
-    if toc < 32 || toc.checked_add(6 * 16).is_none_or(|e| e > data.len()) {
+    if toc < 32
+        || toc
+            .checked_add(streams_n * 16)
+            .is_none_or(|e| e > data.len())
+    {
         return Err(Error::foreign("SPZ", "TOC outside the file"));
     }
     let sizes = stream_sizes(n, degree, 4)?;
-    if sizes.iter().sum::<usize>() as u64 > limits.max_alloc {
-        return Err(Error::foreign(
-            "SPZ",
-            "declared point count exceeds the allocation limit",
-        ));
-    }
+    limits.check_alloc("SPZ streams", sizes.iter().sum::<usize>() as u64, 0)?;
     let u64at = |i: usize| u64::from_le_bytes(data[i..i + 8].try_into().expect("8 bytes"));
-    let mut at = toc + 6 * 16;
+    let mut at = toc + streams_n * 16;
     let mut owned = Vec::with_capacity(6);
-    for (k, want) in sizes.iter().enumerate() {
+    for (k, want) in sizes.iter().enumerate().take(streams_n) {
         let (comp, uncomp) = (u64at(toc + k * 16), u64at(toc + k * 16 + 8));
         if uncomp != *want as u64 {
             return Err(Error::foreign(
@@ -164,6 +166,8 @@ fn read_v4(data: &[u8], limits: &Limits) -> Result<Gaussians> {
         owned.push(out);
         at = end;
     }
+    // A left-out SH stream holds nothing (degree 0).
+    owned.resize(6, Vec::new());
     let streams: Vec<&[u8]> = owned.iter().map(Vec::as_slice).collect();
     Ok(unpack(n, degree, frac, true, &streams))
 }

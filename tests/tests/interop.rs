@@ -169,6 +169,29 @@ fn fixture(name: &str) -> Vec<u8> {
     .unwrap()
 }
 
+/// splat-transform's SPZ v4 of an SH-0 scene has five streams (no SH stream): read, and it
+/// holds the source frame's Gaussians (SPZ's 12-bit positions, 8-bit colours).
+#[test]
+fn spz_v4_without_its_sh_stream_is_read() {
+    let bytes = fixture("wave_0001_sh0.v4.spz");
+    assert_eq!(bytes[15], 5, "the fixture's stream count");
+    let g = spz::read_spz(&bytes, &Limits::default()).unwrap();
+    let src = load("sequence/playcanvas_wave_200f/wave_0001.sog");
+    assert_eq!((g.len(), g.sh_degree), (src.len(), 0));
+    let lo = |g: &dlgs::Gaussians| {
+        let (lo, hi) = g.bounds().unwrap();
+        (
+            lo.map(|v| (v * 10.0).round()),
+            hi.map(|v| (v * 10.0).round()),
+        )
+    };
+    assert_eq!(lo(&g), lo(&src), "same extent (to 0.1)");
+    // Five streams with SH bands declared is still refused.
+    let mut bad = bytes.clone();
+    bad[12] = 1;
+    assert!(spz::read_spz(&bad, &Limits::default()).is_err());
+}
+
 #[test]
 fn spz_v4_from_splat_transform_matches_its_v3_and_the_source_ply() {
     let v4 = spz::read_spz(&fixture("gs3d_lod3_1971.v4.spz"), &Limits::default()).unwrap();
