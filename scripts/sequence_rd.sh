@@ -30,6 +30,7 @@ run "crf10_k10" --crf 10
 run "crf6_k5" --key-interval 5
 run "crf6_k20" --key-interval 20
 run "crf6_k10_sequential_rdlt" --residual-mode sequential
+run "crf6_k10_gop30" --gop-length 30
 run "lossless_features" --lossless-features
 
 # Per-frame CSOG (our still coding of each frame) at each quality of PERFRAME_QUALITIES (default
