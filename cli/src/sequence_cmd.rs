@@ -238,7 +238,7 @@ pub fn run_sequence(
 
 fn print_report(r: &SequenceReport, files: &[PathBuf], fit_s: f64, total_s: f64) {
     println!(
-        "{} frames of {} Gaussians: {} static, {} dynamic; matched, fitted in {fit_s:.1} s, \
+        "{} frames of {} Gaussians: {} static, {} dynamic; read, matched and fitted in {fit_s:.1} s, \
          coded in {:.1} s",
         r.frames,
         r.gaussians,
