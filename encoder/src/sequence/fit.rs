@@ -37,7 +37,7 @@ const SHARED_DIMS: usize = 11;
 const MAX_OPACITY_STEP: f64 = 0.99;
 
 /// What the fit of one GOP could not represent, before any coding.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct GopFit {
     /// Root-mean-square position error over every dynamic Gaussian and frame of the fit.
     pub position_rms: f64,

@@ -1,17 +1,17 @@
 //! Real motion: a sequence of per-frame splat scenes (one file per frame) encoded as a dynamic
 //! `.dlgs` by fitting DLGStream's deformation field to it.
 //!
-//! 1. [`correspondence`]: consecutive frames are matched one to one (they may be sorted
+//! 1. `correspondence`: consecutive frames are matched one to one (they may be sorted
 //!    independently), so every Gaussian becomes a track through the sequence;
 //! 2. the tracks are split into static and dynamic Gaussians by how much they change within
 //!    any GOP ([`is_dynamic`]);
-//! 3. [`fit`]: per GOP, the canonical state is the GOP's middle frame and the key time
+//! 3. `fit`: per GOP, the canonical state is the GOP's middle frame and the key time
 //!    features and decoders are fitted to every frame of the GOP;
 //! 4. the result is a model like any other: [`write`] codes it with the stream encoder
 //!    (canonical coding, HEVC time features, residuals between GOPs).
 
-pub mod correspondence;
-pub mod fit;
+mod correspondence;
+mod fit;
 mod linalg;
 
 use dlgs::container::header::ResidualMode;
@@ -32,7 +32,7 @@ pub struct SequenceSettings {
     /// Frames between key time features (divides `gop_length`).
     pub key_interval: u32,
     /// Refuse the sequence if a pair of consecutive frames matches with fewer confident matches
-    /// than this share (see [`correspondence`]).
+    /// than this share (see [`match_frames`]).
     pub min_confident: f64,
     /// How GOPs after the first carry their canonical state.
     pub residual_mode: ResidualMode,
@@ -52,7 +52,7 @@ impl Default for SequenceSettings {
 }
 
 /// One pair of consecutive frames as matched.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PairReport {
     /// The later frame of the pair (0-based).
     pub frame: usize,
@@ -62,7 +62,7 @@ pub struct PairReport {
 }
 
 /// What building the model found, for the user.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct SequenceReport {
     pub frames: usize,
     pub gop_length: usize,
@@ -178,9 +178,6 @@ pub fn build(
             "the key interval ({}) must divide the GOP length ({})",
             s.key_interval, s.gop_length
         )));
-    }
-    if s.gop_length / s.key_interval < 1 {
-        return Err(Error::input("a GOP needs at least two keys"));
     }
     for (t, f) in frames.iter().enumerate() {
         f.check_shapes()
