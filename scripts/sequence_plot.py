@@ -43,10 +43,13 @@ def main():
         y += 5
     out.append(f'<text x="{w/2}" y="{h-25}" text-anchor="middle">bytes per frame (log)</text>')
     out.append(f'<text x="18" y="{h/2}" transform="rotate(-90 18 {h/2})" text-anchor="middle">mean PSNR over the 200 source frames (dB)</text>')
-    crf = sorted([p for p in pts if p[0].endswith("_k10") and p[0].startswith("crf")], key=lambda p: p[1])
-    if len(crf) > 1:
-        path = " ".join(f"{sx(b):.1f},{sy(q):.1f}" for _, b, q in crf)
-        out.append(f'<polyline points="{path}" fill="none" stroke="#1f77b4" stroke-width="2"/>')
+    # One line through the crf settings of each residual kind: fields (`crfN_k10`, the
+    # default) and intra GOPs (`crfN_k10_intra`, dashed).
+    for suffix, dash in (("_k10", ""), ("_k10_intra", ' stroke-dasharray="5,4"')):
+        crf = sorted([p for p in pts if p[0].endswith(suffix) and p[0].startswith("crf")], key=lambda p: p[1])
+        if len(crf) > 1:
+            path = " ".join(f"{sx(b):.1f},{sy(q):.1f}" for _, b, q in crf)
+            out.append(f'<polyline points="{path}" fill="none" stroke="#1f77b4" stroke-width="2"{dash}/>')
     ours_names = {r["setting"] for r in ours}
     for name, b, q in pts:
         colour = "#1f77b4" if name in ours_names and not name.startswith("perframe") else "#d62728"

@@ -23,15 +23,23 @@ run() {
   coded=$(echo "$log" | sed -n 's/.*coded in \([0-9.]*\) s.*/\1/p')
   echo "$name,$bytes,$((bytes / 200)),$mean,$worst,$(echo "$fit + $coded" | bc)" | tee -a "$OUT/rd.csv"
 }
-run "crf6_k10" 
-run "crf2_k10" --crf 2
+# The default: sequential GOPs with fitted binary voxel residual fields (RNTC).
+run "crf6_k10"
 run "crf4_k10" --crf 4
-run "crf10_k10" --crf 10
-run "crf6_k5" --key-interval 5
-run "crf6_k20" --key-interval 20
-run "crf6_k10_sequential_rdlt" --residual-mode sequential
-run "crf6_k10_gop30" --gop-length 30
-run "lossless_features" --lossless-features
+run "crf2_k10" --crf 2
+run "crf6_k10_field_it150" --field-iterations 150
+run "crf6_k10_field_it2000" --field-iterations 2000
+# Intra GOPs (every GOP's canonical Gaussians in full).
+run "crf6_k10_intra" --residual-mode intra
+run "crf2_k10_intra" --crf 2 --residual-mode intra
+run "crf4_k10_intra" --crf 4 --residual-mode intra
+run "crf10_k10_intra" --crf 10 --residual-mode intra
+run "crf6_k5_intra" --key-interval 5 --residual-mode intra
+run "crf6_k20_intra" --key-interval 20 --residual-mode intra
+run "crf6_k10_gop30_intra" --gop-length 30 --residual-mode intra
+run "lossless_features_intra" --lossless-features --residual-mode intra
+# Sequential GOPs with explicit residuals (RDLT).
+run "crf6_k10_sequential_rdlt" --residual-mode sequential --explicit-residuals
 
 # Per-frame CSOG (our still coding of each frame) at each quality of PERFRAME_QUALITIES (default
 # "high low": `high` is the still default, `low` lands nearer the sequence's PSNR): bytes of

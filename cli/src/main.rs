@@ -71,7 +71,9 @@ enum Cmd {
         #[arg(short, long)]
         output: PathBuf,
         /// Change the residual mode when re-encoding a .dlgs (intra, sequential, parallel);
-        /// residual GOPs then carry explicit residuals (RDLT, see --residual-error).
+        /// residual GOPs then carry explicit residuals (RDLT, see --residual-error). For a
+        /// frame sequence the default is sequential with fitted residual fields (RNTC; see
+        /// --explicit-residuals).
         #[arg(long)]
         residual_mode: Option<String>,
         #[command(flatten)]

@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use dlgs_encoder::sequence::{self, SequenceReport, SequenceSettings};
+use dlgs::container::header::ResidualMode;
+use dlgs_encoder::sequence::{self, NtcFitSettings, SequenceReport, SequenceSettings};
 use dlgs_render::{metrics, render, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -38,6 +39,19 @@ pub struct SequenceArgs {
         default_value_t = 0.9
     )]
     pub min_confident: f64,
+    /// GOPs after the first carry explicit residuals (RDLT) instead of the default fitted
+    /// binary voxel residual field (RNTC). `--residual-mode intra` sends every GOP's canonical
+    /// Gaussians instead (random access without a residual chain, more bytes).
+    #[arg(help_heading = "Sequences (per-frame files)", long)]
+    pub explicit_residuals: bool,
+    /// Adam steps of each residual field's fit (more: a closer field, smaller time-feature
+    /// offsets, longer encode).
+    #[arg(
+        help_heading = "Sequences (per-frame files)",
+        long,
+        default_value_t = 600
+    )]
+    pub field_iterations: usize,
     /// After encoding, decode every source frame's time and render it against the source
     /// frame from 8 orbit cameras around frame 0 (`dlgs compare`'s defaults): mean and worst
     /// PSNR over the frames.
@@ -170,7 +184,14 @@ pub fn run_sequence(
             Some(m) => parse_residual_mode(m)?,
             None => SequenceSettings::default().residual_mode,
         },
+        residual_field: (!seq.explicit_residuals).then(|| NtcFitSettings {
+            iterations: seq.field_iterations,
+            ..NtcFitSettings::default()
+        }),
     };
+    if seq.explicit_residuals && settings.residual_mode == ResidualMode::Intra {
+        bail!("--explicit-residuals needs a residual mode: sequential or parallel, not intra");
+    }
     let pb = bar(files.len(), "matching frames");
     let mut stage = String::new();
     let (model, report) = sequence::build(frames, &settings, &mut |what, done, total| {
@@ -204,8 +225,21 @@ pub fn run_sequence(
     let pb = ProgressBar::new_spinner();
     pb.set_message(format!("coding {} GOPs", model.gops.len()));
     pb.enable_steady_tick(std::time::Duration::from_millis(200));
-    let bytes = sequence::write(&model, cfg, Vec::new())?;
-    pb.finish_and_clear();
+    let fields = settings.residual_field.is_some() && settings.residual_mode != ResidualMode::Intra;
+    let (bytes, written) = if fields {
+        pb.finish_and_clear();
+        let pf = bar(1, "fitting residual fields");
+        let out = sequence::write_with_report(&model, cfg, Vec::new(), &mut |_, done, total| {
+            pf.set_length(total as u64);
+            pf.set_position(done as u64);
+        })?;
+        pf.finish_and_clear();
+        out
+    } else {
+        let out = sequence::write(&model, cfg, Vec::new())?;
+        pb.finish_and_clear();
+        (out, sequence::WriteReport::default())
+    };
     std::fs::write(output, &bytes).with_context(|| format!("writing {}", output.display()))?;
     print_report(
         &report,
@@ -213,6 +247,7 @@ pub fn run_sequence(
         fit_seconds,
         started.elapsed().as_secs_f64(),
     );
+    print_fields(&written);
     println!(
         "{} -> {}: {} bytes ({:.1}% of the frames' {in_bytes} bytes), {:.0} bytes/frame",
         inputs[0].display(),
@@ -347,6 +382,22 @@ fn check(
         1e3 * decode_s / (files.len() * cameras.len()) as f64
     );
     Ok(())
+}
+
+/// Per GOP after the first: how much of the change from the previous GOP the residual field
+/// carries (RMS of the position offsets before and after), and the refitted GOP's position fit.
+fn print_fields(w: &sequence::WriteReport) {
+    for (g, (f, r)) in w.fields.iter().zip(&w.refits).enumerate() {
+        let rms = |v: &[f64]| (v[..3].iter().map(|x| x * x).sum::<f64>() / 3.0).sqrt();
+        println!(
+            "  GOP {}: residual field leaves {:.2e} of the {:.2e} position change (RMS); \
+             refitted position RMS {:.2e}",
+            g + 1,
+            rms(&f.residual_rms),
+            rms(&f.target_rms),
+            r.position_rms
+        );
+    }
 }
 
 #[cfg(test)]

@@ -73,6 +73,17 @@ impl<W: Write> StreamEncoder<W> {
         })
     }
 
+    /// The decoded canonical state the next GOP's residual will be applied to (GOP g-1's or
+    /// GOP 0's, as the decoder holds it), or `None` for intra scenes and before GOP 0.
+    pub fn reference_state(&self) -> Option<&Canonical> {
+        let s = self.writer.scene();
+        match GopHeader::expected(s, self.next_gop).reference_gop {
+            NO_REFERENCE => None,
+            0 => self.first.as_ref(),
+            _ => self.previous.as_ref(),
+        }
+    }
+
     /// Append the next GOP, coded intra from its canonical Gaussians (static scenes).
     pub fn push_intra_gop(&mut self, canon: &Canonical) -> Result<()> {
         self.push_gop(canon, None)

@@ -71,6 +71,35 @@ fn exact_config() -> EncoderConfig {
 /// 6 units wide), the same bytes on 1 and 2 threads; a time between two frames decodes too.
 #[test]
 fn a_short_real_clip_is_fitted_deterministically() {
+    let bytes = fit_and_check_clip(&settings());
+    assert_eq!((count(&bytes, b"CRAW"), count(&bytes, b"RNTC")), (3, 0));
+}
+
+/// The same with the default residuals: GOPs 1 and 2 carry fitted binary voxel fields
+/// (`RNTC`) from the decoder's previous state, and their time features are refitted to what
+/// the fields give, so frames are as close as with full canonical states.
+#[test]
+fn a_short_real_clip_with_residual_fields_is_fitted_deterministically() {
+    let mut s = settings();
+    s.residual_mode = SequenceSettings::default().residual_mode;
+    s.residual_field =
+        SequenceSettings::default()
+            .residual_field
+            .map(|f| sequence::NtcFitSettings {
+                iterations: 150,
+                ..f
+            });
+    assert!(s.residual_field.is_some());
+    let bytes = fit_and_check_clip(&s);
+    // GOP 0 in full, GOPs 1 and 2 as fields.
+    assert_eq!((count(&bytes, b"CRAW"), count(&bytes, b"RNTC")), (1, 2));
+}
+
+fn count(hay: &[u8], needle: &[u8]) -> usize {
+    hay.windows(needle.len()).filter(|w| w == &needle).count()
+}
+
+fn fit_and_check_clip(s: &SequenceSettings) -> Vec<u8> {
     let frames: Vec<Gaussians> = (1..=21).map(|f| shuffled(&wave(f), f as u64).0).collect();
     let encode = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -78,8 +107,7 @@ fn a_short_real_clip_is_fitted_deterministically() {
             .build()
             .unwrap();
         pool.install(|| {
-            let (model, report) =
-                sequence::build(frames.clone(), &settings(), &mut |_, _, _| {}).unwrap();
+            let (model, report) = sequence::build(frames.clone(), s, &mut |_, _, _| {}).unwrap();
             let bytes = sequence::write(&model, exact_config(), Vec::new()).unwrap();
             (bytes, report)
         })
@@ -95,7 +123,8 @@ fn a_short_real_clip_is_fitted_deterministically() {
     // Decoded frames against the source frames. The file stores the dynamic Gaussians in its
     // own order (a k-d layout on the feature tiles): which source Gaussian each one is comes
     // from frame 0 once, then follows the tracks the test builds frame by frame itself.
-    let mut dec = Decoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    let mut dec =
+        Decoder::new(std::io::Cursor::new(bytes.clone()), dlgs::Limits::default()).unwrap();
     let opts = FrameOptions {
         camera_center: [0.0, -5.0, 0.0],
         language: false,
@@ -125,6 +154,7 @@ fn a_short_real_clip_is_fitted_deterministically() {
     // Between frames 3 and 4.
     let mid = dec.frame_at(3.5 / 30.0, &opts).unwrap();
     assert_eq!(mid.dynamics.len(), 4225);
+    bytes
 }
 
 /// Bad input is refused with the frame named.

@@ -139,7 +139,6 @@ pub fn fit_gop(
     gop_length: usize,
     key_interval: usize,
 ) -> (Gaussians, DynamicGop, GopFit) {
-    let keys = gop_length / key_interval + 1;
     let first = frames[canonical_frame(frames.len(), gop_length)];
     let mut canon = Gaussians::new(first.sh_degree, 0);
     for &i in ids {
@@ -148,6 +147,23 @@ pub fn fit_gop(
     for q in &mut canon.rotations {
         *q = unit_quat(*q).map(|v| v as f32);
     }
+    let (field, fit) = fit_gop_to(frames, ids, &canon, gop_length, key_interval);
+    (canon, field, fit)
+}
+
+/// Fit one GOP's field to a given canonical state of its dynamic Gaussians (row r of `canon`
+/// is Gaussian `ids[r]`): e.g. the state a residual field gives from the previous GOP, as the
+/// decoder will hold it. Raw quaternions that are not of unit length take offsets that make
+/// `normalize(q_c + offset)` the frame's rotation (§6.4).
+pub fn fit_gop_to(
+    frames: &[&Gaussians],
+    ids: &[usize],
+    canon: &Gaussians,
+    gop_length: usize,
+    key_interval: usize,
+) -> (DynamicGop, GopFit) {
+    let keys = gop_length / key_interval + 1;
+    let first = frames[0];
     let n = ids.len();
     let stride = first.sh_stride();
     // Hermite rows over [p_0..p_K-1, m_0..m_K-1]; hat rows over [c_0..c_K-1].
@@ -208,7 +224,15 @@ pub fn fit_gop(
                 frame_sq[u] += e;
             }
         }
-        let qc = unit_quat(canon.rotations[row]);
+        // A unit canonical quaternion (the frame's own) takes `q - q_c`; any other (a residual
+        // field's output) `|q_c| q - q_c`, whose sum with q_c normalises to q.
+        let raw = canon.rotations[row].map(|v| v as f64);
+        let len = raw.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (qc, qlen) = if (len - 1.0).abs() < 1e-6 {
+            (unit_quat(canon.rotations[row]), 1.0)
+        } else {
+            (raw, len)
+        };
         let sc = canon.log_scales[row];
         let dc = &canon.sh[row * stride..row * stride + 3];
         let colour: Vec<Vec<f64>> = (0..3)
@@ -238,7 +262,7 @@ pub fn fit_gop(
                 q = q.map(|x| -x);
             }
             for c in 0..4 {
-                v[3 + c] = q[c] - qc[c];
+                v[3 + c] = q[c] * qlen - qc[c];
             }
             for c in 0..3 {
                 v[7 + c] = colour[c][k];
@@ -303,7 +327,7 @@ pub fn fit_gop(
         shared_energy_kept: if total > 0.0 { kept / total } else { 1.0 },
         scale_offsets: scale_moves,
     };
-    (canon, DynamicGop { features, mlps }, fit)
+    (DynamicGop { features, mlps }, fit)
 }
 
 /// The deformation model the fit produces.
