@@ -10,6 +10,7 @@ pub mod interp;
 mod lru;
 pub mod panel;
 pub mod planar;
+pub mod scaffold;
 pub mod stream;
 
 use std::fs::File;

@@ -79,34 +79,42 @@ fn layer(x: &[Lane], weights: &[f32], y: &mut [Lane]) {
 /// 3e-7 (test below), the same bits on every CPU (format-spec §6.4).
 #[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
 pub fn tanh_lanes(v: &mut [Lane]) {
+    for lane in v {
+        for x in lane.iter_mut() {
+            *x = tanh_f32(*x);
+        }
+    }
+}
+
+/// The decoder's `tanh` (format-spec §6.4): `sign(x)(1-e)/(1+e)`, `e = exp(-2 min(|x|, 9))`,
+/// `exp` by Cody-Waite reduction and a degree-7 Taylor polynomial; the same bits on every
+/// platform and SIMD width.
+#[inline(always)]
+pub fn tanh_f32(x: f32) -> f32 {
     const LOG2E: f32 = std::f32::consts::LOG2_E;
     const LN2_HI: f32 = 0.693_145_75;
     const LN2_LO: f32 = 1.428_606_8e-6;
-    for lane in v {
-        for x in lane.iter_mut() {
-            // tanh(9) rounds to 1 in f32; the clamp also maps NaN to 9 (inputs are finite).
-            let a = x.abs().min(9.0);
-            let y = -2.0 * a;
-            let n = (y * LOG2E).round();
-            let r = (-n).mul_add(LN2_LO, (-n).mul_add(LN2_HI, y));
-            let mut p: f32 = 1.0 / 5040.0;
-            for c in [
-                1.0 / 720.0,
-                1.0 / 120.0,
-                1.0 / 24.0,
-                1.0 / 6.0,
-                0.5,
-                1.0,
-                1.0,
-            ] {
-                p = p.mul_add(r, c);
-            }
-            // n is in [-26, 0]: a normal power of two.
-            let e = p * f32::from_bits(((n as i32 + 127) as u32) << 23);
-            let t = (1.0 - e) / (1.0 + e);
-            *x = t.copysign(*x);
-        }
+    // tanh(9) rounds to 1 in f32; the clamp also maps NaN to 9 (inputs are finite).
+    let a = x.abs().min(9.0);
+    let y = -2.0 * a;
+    let n = (y * LOG2E).round();
+    let r = (-n).mul_add(LN2_LO, (-n).mul_add(LN2_HI, y));
+    let mut p: f32 = 1.0 / 5040.0;
+    for c in [
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ] {
+        p = p.mul_add(r, c);
     }
+    // n is in [-26, 0]: a normal power of two.
+    let e = p * f32::from_bits(((n as i32 + 127) as u32) << 23);
+    let t = (1.0 - e) / (1.0 + e);
+    t.copysign(x)
 }
 
 fn relu(v: &mut [Lane]) {

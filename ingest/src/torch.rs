@@ -228,29 +228,71 @@ fn tensor_args(p: &Pickle, id: Id) -> Option<Id> {
 }
 
 /// Turn every tensor reachable from a dict into (name, tensor), resolving storages through
-/// `storage_of`.
+/// `storage_of`. Tensors in nested dicts (e.g. the reference's `mlps.pth`, a dict of
+/// state_dicts) are named `outer.inner`, as PyTorch flattens them; nesting deeper than 4 is
+/// ignored (a pickle may reference itself).
 fn named_tensors<'s>(
     p: &Pickle,
     dict: Id,
+    nested: bool,
     storage_of: StorageOf<'_, 's>,
 ) -> Result<Vec<(String, Tensor)>, String> {
+    let mut out = Vec::new();
+    let depth = if nested { 0 } else { 4 };
+    collect_tensors(p, dict, "", depth, storage_of, &mut out)?;
+    Ok(out)
+}
+
+fn collect_tensors<'s>(
+    p: &Pickle,
+    dict: Id,
+    prefix: &str,
+    depth: usize,
+    storage_of: StorageOf<'_, 's>,
+    out: &mut Vec<(String, Tensor)>,
+) -> Result<(), String> {
     let entries = p
         .dict(dict)
         .ok_or("the pickle is not a dict (a state_dict)")?;
-    let mut out = Vec::new();
     for &(k, v) in entries {
         let Some(name) = p.str(k) else { continue };
         if let Some(args) = tensor_args(p, v) {
-            out.push((name.to_string(), rebuild(p, args, storage_of)?));
+            out.push((format!("{prefix}{name}"), rebuild(p, args, storage_of)?));
+        } else if depth < 4 && p.dict(v).is_some() {
+            collect_tensors(
+                p,
+                v,
+                &format!("{prefix}{name}."),
+                depth + 1,
+                storage_of,
+                out,
+            )?;
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Read a `torch.save` zip file (any tensors at the top level of its dict) from memory.
 pub fn read_zip_state_dict<R: Read + Seek>(
     reader: R,
     what: &str,
+) -> Result<Vec<(String, Tensor)>, IngestError> {
+    read_zip(reader, what, false)
+}
+
+/// As [`read_zip_state_dict`], with the tensors of nested dicts too, named `outer.inner` (the
+/// reference's HAC `mlps.pth` is a dict of state_dicts and bounds).
+pub fn read_zip_nested<R: Read + Seek>(
+    reader: R,
+    what: &str,
+) -> Result<Vec<(String, Tensor)>, IngestError> {
+    read_zip(reader, what, true)
+}
+
+fn read_zip<R: Read + Seek>(
+    reader: R,
+    what: &str,
+    nested: bool,
 ) -> Result<Vec<(String, Tensor)>, IngestError> {
     let err = |r: String| IngestError::format(what, r);
     let mut zip = zip::ZipArchive::new(reader).map_err(|e| err(format!("not a torch zip: {e}")))?;
@@ -287,7 +329,7 @@ pub fn read_zip_state_dict<R: Read + Seek>(
         let (dt, b) = storages.get(&key).ok_or("storage not loaded")?;
         Ok((*dt, Cow::Borrowed(b.as_slice())))
     };
-    named_tensors(&p, p.root, &storage_of).map_err(err)
+    named_tensors(&p, p.root, nested, &storage_of).map_err(err)
 }
 
 fn read_entry<R: Read + Seek>(

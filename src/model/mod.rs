@@ -7,6 +7,7 @@ pub mod ntc;
 mod ntc_config;
 mod ntc_lanes;
 pub mod residual;
+pub mod scaffold;
 
 pub use dynamic::{DeformMlps, DynamicGop, Layer, Mlp, MlpRole, TimeFeatures, TimePoint};
 pub use gaussians::{sh_coeffs, sigmoid, Canonical, Gaussians};

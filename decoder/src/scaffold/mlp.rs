@@ -1,0 +1,45 @@
+//! Row-at-a-time evaluation of the Scaffold-GS variant's MLPs, with the same arithmetic as the
+//! 3DGS variant's decoders: each output starts at its bias (or +0) and adds its inputs in
+//! increasing order, one fused multiply-add each; ReLU is `max(v, 0)`; `tanh` is the decoder's
+//! own ([`crate::panel::tanh_f32`]) and the logistic function is `dlgs::elementary`'s. So a row
+//! gives the same bits on every platform and thread count.
+
+use dlgs::elementary::sigmoid_f32;
+use dlgs::model::scaffold::{Activation, Dense, TwoLayer};
+
+use crate::panel::tanh_f32;
+
+#[inline]
+fn dense(d: &Dense, x: &[f32], out: &mut [f32]) {
+    for (o, y) in out.iter_mut().enumerate().take(d.outputs) {
+        let mut acc = d.bias.as_ref().map_or(0.0, |b| b[o]);
+        for (w, xi) in d.weights[o * d.inputs..(o + 1) * d.inputs].iter().zip(x) {
+            acc = w.mul_add(*xi, acc);
+        }
+        *y = acc;
+    }
+}
+
+#[inline]
+pub fn activate(a: Activation, v: f32) -> f32 {
+    match a {
+        Activation::Identity => v,
+        Activation::Relu => v.max(0.0),
+        Activation::Tanh => tanh_f32(v),
+        Activation::Sigmoid => sigmoid_f32(v),
+    }
+}
+
+/// `out = act(W2 relu(W1 x + b1) + b2)` for one row; `hidden` is scratch of at least the hidden
+/// width, `out` at least the output width.
+pub fn eval(m: &TwoLayer, x: &[f32], hidden: &mut [f32], out: &mut [f32]) {
+    let h = &mut hidden[..m.first.outputs];
+    dense(&m.first, x, h);
+    for v in h.iter_mut() {
+        *v = v.max(0.0);
+    }
+    dense(&m.second, h, out);
+    for v in out.iter_mut().take(m.second.outputs) {
+        *v = activate(m.output, *v);
+    }
+}

@@ -1,0 +1,11 @@
+//! Decoding the Scaffold-GS variant (issue 51; ../shared/reference §5.2): dynamic anchors at a
+//! time, then the neural Gaussians a camera sees. Every step is row-independent with fixed
+//! block sizes, so frames are the same on any thread count.
+
+mod anchor_deform;
+mod mlp;
+mod neural;
+
+pub use anchor_deform::deform_anchors;
+pub use mlp::{activate, eval as eval_mlp};
+pub use neural::{neural_gaussians, NeuralGaussians, ViewRequest};

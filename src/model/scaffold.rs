@@ -1,0 +1,221 @@
+//! The Scaffold-GS variant's model (the reference's `--type hac`; ../shared/reference §1.3-1.4,
+//! §5.2): anchors that carry a feature, offsets and scalings, from which small MLPs generate
+//! "neural Gaussians" for each view, and the bias-free MLPs that deform dynamic anchors from
+//! interpolated time features.
+//!
+//! Only the data and its checks live here; generating a view's Gaussians and deforming
+//! anchors at a time are decode work (`dlgs-decoder`'s `scaffold`).
+
+/// Child Gaussians per anchor (`n_offsets`).
+pub const N_OFFSETS: usize = 10;
+/// Anchor feature width (`feat_dim`).
+pub const FEAT_DIM: usize = 50;
+/// Log-scalings per anchor: 3 scale the offsets, 3 the children's scales.
+pub const SCALING_DIM: usize = 6;
+/// Inputs of the view-dependent MLPs: feature, view direction, distance.
+pub const VIEW_INPUTS: usize = FEAT_DIM + 4;
+/// Language feature width per child.
+pub const LANG_DIM: usize = 9;
+/// Time-feature channels of a dynamic anchor.
+pub const TIME_CHANNELS: usize = 16;
+
+/// A set of anchors, row-major per attribute.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Anchors {
+    pub positions: Vec<[f32; 3]>,
+    /// `FEAT_DIM` per anchor.
+    pub features: Vec<f32>,
+    /// `N_OFFSETS * 3` per anchor, offset-major (`offsets[(a * N_OFFSETS + k) * 3 + d]`).
+    pub offsets: Vec<f32>,
+    /// `SCALING_DIM` per anchor, natural log.
+    pub log_scalings: Vec<f32>,
+}
+
+impl Anchors {
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+    /// Every attribute has one row per anchor.
+    pub fn check_shapes(&self) -> std::result::Result<(), String> {
+        let n = self.len();
+        if self.features.len() != n * FEAT_DIM
+            || self.offsets.len() != n * N_OFFSETS * 3
+            || self.log_scalings.len() != n * SCALING_DIM
+        {
+            return Err(format!(
+                "anchor attributes do not match {n} anchors ({} features, {} offsets, {} \
+                 scalings)",
+                self.features.len(),
+                self.offsets.len(),
+                self.log_scalings.len()
+            ));
+        }
+        Ok(())
+    }
+    pub fn feature(&self, a: usize) -> &[f32] {
+        &self.features[a * FEAT_DIM..(a + 1) * FEAT_DIM]
+    }
+    pub fn offset(&self, a: usize) -> &[f32] {
+        &self.offsets[a * N_OFFSETS * 3..(a + 1) * N_OFFSETS * 3]
+    }
+    pub fn log_scaling(&self, a: usize) -> &[f32] {
+        &self.log_scalings[a * SCALING_DIM..(a + 1) * SCALING_DIM]
+    }
+}
+
+/// What follows a dense layer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Activation {
+    Identity,
+    Relu,
+    Tanh,
+    Sigmoid,
+}
+
+/// A linear layer, PyTorch layout (`weights[o * inputs + i]`), with or without bias.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dense {
+    pub inputs: usize,
+    pub outputs: usize,
+    pub weights: Vec<f32>,
+    pub bias: Option<Vec<f32>>,
+}
+
+/// `Linear -> ReLU -> Linear -> activation` (every MLP of this variant has this shape).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TwoLayer {
+    pub first: Dense,
+    pub second: Dense,
+    pub output: Activation,
+}
+
+impl TwoLayer {
+    pub fn inputs(&self) -> usize {
+        self.first.inputs
+    }
+    pub fn outputs(&self) -> usize {
+        self.second.outputs
+    }
+    /// Shapes agree, every weight is finite, biases are present or absent as `biased` says.
+    pub fn check(
+        &self,
+        name: &str,
+        inputs: usize,
+        outputs: usize,
+        biased: bool,
+    ) -> Result<(), String> {
+        let (a, b) = (&self.first, &self.second);
+        let dense_ok = |d: &Dense| {
+            d.weights.len() == d.inputs * d.outputs
+                && d.bias.as_ref().is_none_or(|v| v.len() == d.outputs)
+                && d.bias.is_some() == biased
+        };
+        if a.inputs != inputs
+            || b.outputs != outputs
+            || a.outputs != b.inputs
+            || !dense_ok(a)
+            || !dense_ok(b)
+        {
+            return Err(format!(
+                "{name}: expected {inputs} -> h -> {outputs}{}, got {} -> {} -> {}",
+                if biased {
+                    " with biases"
+                } else {
+                    " without biases"
+                },
+                a.inputs,
+                a.outputs,
+                b.outputs
+            ));
+        }
+        let finite = |d: &Dense| {
+            d.weights
+                .iter()
+                .chain(d.bias.iter().flatten())
+                .all(|v| v.is_finite())
+        };
+        if !finite(a) || !finite(b) {
+            return Err(format!("{name}: weights must be finite"));
+        }
+        Ok(())
+    }
+}
+
+/// The view-dependent decoders (with biases), shared by every GOP (trained in GOP 0).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScaffoldMlps {
+    /// 54 -> 50 -> 20 (colour and language opacity per child, interleaved), tanh; 54 -> 50 -> 10
+    /// without language.
+    pub opacity: TwoLayer,
+    /// 54 -> 50 -> 30, sigmoid: RGB per child.
+    pub color: TwoLayer,
+    /// 54 -> 50 -> 70: per child 3 scale factors (through a sigmoid) and a raw quaternion.
+    pub cov: TwoLayer,
+    /// 54 -> 50 -> 90: 9 language values per child.
+    pub language: Option<TwoLayer>,
+}
+
+impl ScaffoldMlps {
+    pub fn check(&self) -> Result<(), String> {
+        let lang = self.language.is_some();
+        let opacities = if lang { 2 * N_OFFSETS } else { N_OFFSETS };
+        self.opacity
+            .check("mlp_opacity", VIEW_INPUTS, opacities, true)?;
+        self.color
+            .check("mlp_color", VIEW_INPUTS, 3 * N_OFFSETS, true)?;
+        self.cov
+            .check("mlp_cov", VIEW_INPUTS, 7 * N_OFFSETS, true)?;
+        if let Some(l) = &self.language {
+            l.check("mlp_language", VIEW_INPUTS, LANG_DIM * N_OFFSETS, true)?;
+        }
+        let acts = [
+            (&self.opacity, Activation::Tanh),
+            (&self.color, Activation::Sigmoid),
+            (&self.cov, Activation::Identity),
+        ];
+        if acts.iter().any(|(m, a)| m.output != *a)
+            || self
+                .language
+                .as_ref()
+                .is_some_and(|l| l.output != Activation::Identity)
+        {
+            return Err("output activations must be tanh, sigmoid, none, none".into());
+        }
+        Ok(())
+    }
+}
+
+/// The four bias-free anchor deformation MLPs of one GOP (§5.2; their names are historical).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnchorDeformMlps {
+    /// `mlp_deform_xyz`: 19 (time features, normalised anchor) -> 64 -> 3, added to the position.
+    pub position: TwoLayer,
+    /// `mlp_deform_cov`: 16 -> 128 -> 50, added to the feature.
+    pub feature: TwoLayer,
+    /// `mlp_deform_opacity`: 16 -> 64 -> 30, added to the offsets.
+    pub offsets: TwoLayer,
+    /// `mlp_deform_color`: 16 -> 64 -> 6, added to the log-scalings.
+    pub scaling: TwoLayer,
+}
+
+impl AnchorDeformMlps {
+    pub fn check(&self) -> Result<(), String> {
+        self.position
+            .check("mlp_deform_xyz", TIME_CHANNELS + 3, 3, false)?;
+        self.feature
+            .check("mlp_deform_cov", TIME_CHANNELS, FEAT_DIM, false)?;
+        self.offsets
+            .check("mlp_deform_opacity", TIME_CHANNELS, 3 * N_OFFSETS, false)?;
+        self.scaling
+            .check("mlp_deform_color", TIME_CHANNELS, SCALING_DIM, false)?;
+        for m in [&self.position, &self.feature, &self.offsets, &self.scaling] {
+            if m.output != Activation::Identity {
+                return Err("deformation MLPs have no output activation".into());
+            }
+        }
+        Ok(())
+    }
+}
