@@ -143,8 +143,21 @@ pub(crate) fn decode_dynamic(
     hevc: Option<&SharedKeyPictureDecoder>,
     p: &DynamicPayloads,
 ) -> Result<(PlanarFeatures, DeformMlps)> {
-    let (bytes, at) = (&p.tfea.0, p.tfea.1);
-    let features = match tfea::decode(bytes, at, scene, limits)? {
+    let features = decode_time_features(scene, limits, hevc, &p.tfea.0, p.tfea.1)?;
+    let mlps = mlpw::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
+    Ok((features, mlps))
+}
+
+/// Decode a `TFEA` payload (at file offset `at`) into the key- and channel-major layout; HEVC
+/// through `hevc`. Both variants' dynamic sets use it.
+pub(crate) fn decode_time_features(
+    scene: &SceneHeader,
+    limits: &Limits,
+    hevc: Option<&SharedKeyPictureDecoder>,
+    bytes: &[u8],
+    at: u64,
+) -> Result<PlanarFeatures> {
+    Ok(match tfea::decode(bytes, at, scene, limits)? {
         TfeaBody::Exact(f) => PlanarFeatures::new(&f),
         TfeaBody::Hevc {
             tiling,
@@ -181,9 +194,7 @@ pub(crate) fn decode_dynamic(
             };
             PlanarFeatures::from_columns(tiling.n, tiling.keys, tiling.channels, data)
         }
-    };
-    let mlps = mlpw::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
-    Ok((features, mlps))
+    })
 }
 
 /// Intra-only HEVC time features (`TFEA` codec 3): packet `k` is key `k`'s picture alone.

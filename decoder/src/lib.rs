@@ -125,8 +125,15 @@ impl Decoder<BufReader<File>> {
 
 impl<R: Read + Seek> Decoder<R> {
     pub fn new(src: R, limits: Limits) -> Result<Self> {
+        let reader = FileReader::open_with_limits(src, limits)?;
+        if reader.scene().variant == dlgs::container::header::Variant::Scaffold {
+            return Err(Error::request(
+                "a Scaffold-GS file: its frames depend on the camera; decode it with \
+                 dlgs_decoder::scaffold::ScaffoldDecoder",
+            ));
+        }
         Ok(Decoder {
-            reader: FileReader::open_with_limits(src, limits)?,
+            reader,
             gops: GopLru::new(1, None),
             states: GopLru::new(4, Some(0)),
             hevc: hevc::default_decoder(),

@@ -16,6 +16,7 @@ pub mod judge_views;
 pub mod orientation;
 pub mod quality_search;
 mod refit_stage;
+pub mod scaffold;
 pub mod sequence;
 mod still;
 mod stream;

@@ -25,6 +25,12 @@ impl ChunkType {
     pub const RDLT: ChunkType = ChunkType(*b"RDLT");
     /// Language autoencoder decoder and canonical negatives, for queries, §6.8.
     pub const LAED: ChunkType = ChunkType(*b"LAED");
+    /// Raw canonical anchors of a Scaffold-GS GOP, §6.9.
+    pub const ANCR: ChunkType = ChunkType(*b"ANCR");
+    /// View-dependent MLPs of a Scaffold-GS GOP, §6.10.
+    pub const AMLP: ChunkType = ChunkType(*b"AMLP");
+    /// Anchor deformation MLPs and box of a Scaffold-GS GOP, §6.11.
+    pub const ADEF: ChunkType = ChunkType(*b"ADEF");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes
@@ -62,6 +68,9 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::RNTC,
     ChunkType::RDLT,
     ChunkType::LAED,
+    ChunkType::ANCR,
+    ChunkType::AMLP,
+    ChunkType::ADEF,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

@@ -219,3 +219,58 @@ impl AnchorDeformMlps {
         Ok(())
     }
 }
+
+/// One GOP's canonical anchors: static, then dynamic.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ScaffoldCanonical {
+    pub statics: Anchors,
+    pub dynamics: Anchors,
+}
+
+/// One GOP's anchor deformation: bounds of the normalised anchor and the four MLPs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnchorDeformation {
+    /// `x_bound_min`, `x_bound_max`: `norm_anchor = (a - min) / (max - min)`.
+    pub bound_min: [f32; 3],
+    pub bound_max: [f32; 3],
+    pub mlps: AnchorDeformMlps,
+}
+
+/// What a Scaffold-GS scene header must say (format-spec §6.12): SH degree 0 (colours come
+/// from the colour MLP), intra GOPs, the plain deformation model (lerp), 16 time channels iff
+/// there are dynamic anchors, and language of 3 levels x 3 dims or none.
+pub fn check_scene(s: &crate::container::SceneHeader) -> Result<(), String> {
+    use crate::container::header::{DeformModel, ResidualMode};
+    if s.sh_degree != 0 {
+        return Err(format!(
+            "sh_degree {} (Scaffold-GS scenes have 0)",
+            s.sh_degree
+        ));
+    }
+    if s.residual_mode != ResidualMode::Intra {
+        return Err("Scaffold-GS scenes are intra (residual_mode 0) in this version".into());
+    }
+    if s.deform_model != DeformModel::PaperLerp {
+        return Err("Scaffold-GS scenes use deform_model 1 (lerp of time features)".into());
+    }
+    let want = if s.n_dynamic > 0 {
+        TIME_CHANNELS as u8
+    } else {
+        0
+    };
+    if s.time_channels != want {
+        return Err(format!(
+            "time_channels {} ({want} expected)",
+            s.time_channels
+        ));
+    }
+    if (s.lang_levels as usize * s.lang_dims as usize) != 0
+        && (s.lang_levels, s.lang_dims) != (3, 3)
+    {
+        return Err(format!(
+            "language {}x{} (3x3 or none)",
+            s.lang_levels, s.lang_dims
+        ));
+    }
+    Ok(())
+}

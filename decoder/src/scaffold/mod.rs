@@ -3,9 +3,11 @@
 //! block sizes, so frames are the same on any thread count.
 
 mod anchor_deform;
+mod file;
 mod mlp;
 mod neural;
 
 pub use anchor_deform::deform_anchors;
+pub use file::{ScaffoldDecoder, ScaffoldGop};
 pub use mlp::{activate, eval as eval_mlp};
 pub use neural::{neural_gaussians, NeuralGaussians, ViewRequest};
