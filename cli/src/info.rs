@@ -163,8 +163,13 @@ pub fn run_info(path: &Path, json: bool, channels: bool) -> Result<()> {
         h.gop_length,
         h.key_interval
     );
+    let what = if h.variant == dlgs::container::header::Variant::Scaffold {
+        "anchors (10 neural Gaussians each, generated per camera)"
+    } else {
+        "Gaussians"
+    };
     println!(
-        "  {} static + {} dynamic Gaussians, SH degree {}, language {}x{}, {} time channels",
+        "  {} static + {} dynamic {what}, SH degree {}, language {}x{}, {} time channels",
         h.n_static, h.n_dynamic, h.sh_degree, h.lang_levels, h.lang_dims, h.time_channels
     );
     if let Some(t) = &info.time_features {

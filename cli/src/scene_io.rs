@@ -7,6 +7,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dlgs::Gaussians;
+use dlgs_decoder::scaffold::{ScaffoldDecoder, ViewRequest};
 use dlgs_decoder::{Decoder, FrameOptions};
 
 pub fn is_dlgs(path: &Path) -> bool {
@@ -17,12 +18,27 @@ pub fn is_dlgs(path: &Path) -> bool {
 /// A scene file opened once and asked for Gaussians per time and camera.
 pub enum Source {
     Dlgs(Box<Decoder<BufReader<File>>>, String),
+    /// A Scaffold-GS `.dlgs`: its Gaussians are generated per camera.
+    Scaffold(Box<ScaffoldDecoder<BufReader<File>>>, String),
     Splat(Gaussians),
+}
+
+/// Whether a `.dlgs` file is of the Scaffold-GS variant (`HEAD.variant = 1`).
+fn is_scaffold(path: &Path) -> Result<bool> {
+    let f = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let r = dlgs::container::FileReader::open(BufReader::new(f))
+        .with_context(|| format!("opening {}", path.display()))?;
+    Ok(r.scene().variant == dlgs::container::header::Variant::Scaffold)
 }
 
 impl Source {
     pub fn open(path: &Path) -> Result<Self> {
-        if is_dlgs(path) {
+        if is_dlgs(path) && is_scaffold(path)? {
+            let f = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+            let dec = ScaffoldDecoder::new(BufReader::new(f), dlgs::Limits::default())
+                .with_context(|| format!("opening {}", path.display()))?;
+            Ok(Source::Scaffold(Box::new(dec), path.display().to_string()))
+        } else if is_dlgs(path) {
             let dec =
                 Decoder::open_path(path).with_context(|| format!("opening {}", path.display()))?;
             Ok(Source::Dlgs(Box::new(dec), path.display().to_string()))
@@ -47,6 +63,27 @@ impl Source {
                     .with_context(|| format!("decoding GOP {} of {name}", tp.gop))?
                     .merged())
             }
+            Source::Scaffold(dec, name) => {
+                // The anchors themselves stand for the scene (bounds, camera placement).
+                let tp = dec
+                    .scene()
+                    .locate(t)
+                    .with_context(|| format!("{name} at t = {t} s"))?;
+                let gop = dec
+                    .gop(tp.gop)
+                    .with_context(|| format!("decoding GOP {} of {name}", tp.gop))?;
+                let (_, a) = gop.anchors_at(tp.key, tp.delta);
+                let mut g = Gaussians::new(0, 0);
+                for i in 0..a.len() {
+                    g.positions.push(a.positions[i]);
+                    let s = a.log_scaling(i);
+                    g.log_scales.push([s[3], s[4], s[5]]);
+                    g.rotations.push([1.0, 0.0, 0.0, 0.0]);
+                    g.opacity.push(0.0);
+                    g.sh.extend_from_slice(&[0.0; 3]);
+                }
+                Ok(g)
+            }
         }
     }
 
@@ -66,6 +103,17 @@ impl Source {
                     .with_context(|| format!("decoding {name} at t = {t} s"))?;
                 Ok(f.merged())
             }
+            Source::Scaffold(dec, name) => {
+                let view = ViewRequest {
+                    camera_center,
+                    language,
+                    visible: None,
+                };
+                let f = dec
+                    .frame_at(t, &view)
+                    .with_context(|| format!("decoding {name} at t = {t} s"))?;
+                Ok(f.to_gaussians())
+            }
         }
     }
 }
@@ -76,6 +124,7 @@ impl Source {
         match self {
             Source::Splat(_) => None,
             Source::Dlgs(dec, _) => Some((dec.scene().fps(), dec.scene().frame_count)),
+            Source::Scaffold(dec, _) => Some((dec.scene().fps(), dec.scene().frame_count)),
         }
     }
 
@@ -84,13 +133,14 @@ impl Source {
         match self {
             Source::Splat(_) => None,
             Source::Dlgs(dec, _) => dec.scene().locate(t).ok().map(|p| p.gop),
+            Source::Scaffold(dec, _) => dec.scene().locate(t).ok().map(|p| p.gop),
         }
     }
 
     /// The file's language decoder (`.dlgs` with a `LAED` chunk), if any.
     pub fn lang_decoder(&mut self) -> Result<Option<dlgs::model::lang_decoder::LangDecoder>> {
         match self {
-            Source::Splat(_) => Ok(None),
+            Source::Splat(_) | Source::Scaffold(..) => Ok(None),
             Source::Dlgs(dec, name) => dec
                 .lang_decoder()
                 .with_context(|| format!("reading the language decoder of {name}")),
@@ -102,6 +152,10 @@ impl Source {
         match self {
             Source::Splat(_) => None,
             Source::Dlgs(dec, _) => {
+                let s = dec.scene();
+                (s.lang_levels > 0).then_some((s.lang_levels as usize, s.lang_dims as usize))
+            }
+            Source::Scaffold(dec, _) => {
                 let s = dec.scene();
                 (s.lang_levels > 0).then_some((s.lang_levels as usize, s.lang_dims as usize))
             }

@@ -101,6 +101,7 @@ pub fn run_boundaries(a: &Path, b: &Path, cams: &CameraArgs) -> Result<()> {
     let mut sb = Source::open(b)?;
     let scene = match &sa {
         Source::Dlgs(d, _) => d.scene().clone(),
+        Source::Scaffold(d, _) => d.scene().clone(),
         Source::Splat(_) => anyhow::bail!("{} is not a .dlgs stream", a.display()),
     };
     let cameras = cams.resolve(&sa.canonical(0.0)?)?;

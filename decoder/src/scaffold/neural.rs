@@ -174,3 +174,41 @@ pub fn neural_gaussians(
     }
     all
 }
+
+/// The SH degree-0 constant: colour = 0.5 + C0 × DC.
+const SH_C0: f32 = 0.282_094_8;
+
+impl NeuralGaussians {
+    /// As plain 3D Gaussians for the 3DGS renderer and exporters: colours as SH degree 0
+    /// (`(rgb - 0.5) / C0`), scales as logarithms, opacities as logits of the tanh outputs.
+    /// Lossy where the two models differ: an opacity within 1e-7 of 0 or 1 is clamped there
+    /// first, and a negative language opacity (which the reference's rasteriser accepts and
+    /// 3DGS cannot express) becomes the logit of 1e-7, i.e. no language contribution.
+    pub fn to_gaussians(&self) -> dlgs::Gaussians {
+        use dlgs::elementary::ln_f32;
+        let logit = |a: f32| {
+            let a = a.clamp(1e-7, 1.0 - 1e-7);
+            ln_f32(a / (1.0 - a))
+        };
+        let lang_width = if self.lang.is_empty() { 0 } else { LANG_DIM };
+        let mut g = dlgs::Gaussians::new(0, lang_width);
+        g.positions = self.positions.clone();
+        g.log_scales = self
+            .scales
+            .iter()
+            .map(|s| s.map(|v| ln_f32(v.max(f32::MIN_POSITIVE))))
+            .collect();
+        g.rotations = self.rotations.clone();
+        g.opacity = self.opacity.iter().map(|&a| logit(a)).collect();
+        g.sh = self
+            .colors
+            .iter()
+            .flat_map(|c| c.map(|v| (v - 0.5) / SH_C0))
+            .collect();
+        if lang_width > 0 {
+            g.lang_opacity = self.lang_opacity.iter().map(|&a| logit(a)).collect();
+            g.lang = self.lang.clone();
+        }
+        g
+    }
+}
