@@ -130,6 +130,10 @@ enum Cmd {
         /// Background colour r,g,b in [0,1].
         #[arg(long, default_value = "1,1,1")]
         background: String,
+        /// Scaffold-GS files: decode every anchor, not only those whose children can reach
+        /// into the view (the same image, more time; docs/benchmarks/scaffold.md).
+        #[arg(long)]
+        no_cull: bool,
         /// Output PNG; with several cameras, `_NN` is inserted before the extension.
         #[arg(short, long)]
         output: PathBuf,
@@ -279,6 +283,7 @@ fn main() -> Result<()> {
             t,
             features,
             background,
+            no_cull,
             output,
         } => {
             let mut src = scene_io::Source::open(&scene)?;
@@ -288,7 +293,9 @@ fn main() -> Result<()> {
                 features,
             };
             for (i, cam) in cameras.iter().enumerate() {
-                let g = src.at(t, cam.position.to_array(), features)?;
+                let started = std::time::Instant::now();
+                let g = src.at_camera(t, cam, features, !no_cull)?;
+                let decode_ms = started.elapsed().as_secs_f64() * 1e3;
                 let img = render(&g, cam, &opts).map_err(anyhow::Error::msg)?;
                 let out = numbered(&output, i, cameras.len());
                 image_out::save_rgb_png(&out, &img.color, img.width, img.height)
@@ -301,10 +308,11 @@ fn main() -> Result<()> {
                     std::fs::write(out.with_extension("features.f32"), raw)?;
                 }
                 println!(
-                    "{} {}x{}: {} visible Gaussians, {} tile pairs, {:.1} ms (project {:.1}, raster {:.1}) -> {}",
+                    "{} {}x{}: decoded {} Gaussians in {decode_ms:.1} ms, {} visible, {} tile pairs, rendered in {:.1} ms (project {:.1}, raster {:.1}) -> {}",
                     cam.name,
                     img.width,
                     img.height,
+                    g.len(),
                     img.visible,
                     img.pairs,
                     img.timings.project_ms + img.timings.raster_ms,

@@ -119,6 +119,29 @@ impl Source {
 }
 
 impl Source {
+    /// The Gaussians at `t` seen by `camera`. For Scaffold-GS files, with `cull`, only the
+    /// anchors whose children can reach into the camera's frustum are decoded (the image is the
+    /// same; the time is not).
+    pub fn at_camera(
+        &mut self,
+        t: f64,
+        camera: &dlgs_render::Camera,
+        language: bool,
+        cull: bool,
+    ) -> Result<Gaussians> {
+        match self {
+            Source::Scaffold(dec, name) if cull => {
+                let in_view =
+                    |p: &[[f32; 3]], r: &[f32]| dlgs_render::cull::spheres_in_view(camera, p, r);
+                let (f, _) = dec
+                    .frame_in_view(t, camera.position.to_array(), language, &in_view)
+                    .with_context(|| format!("decoding {name} at t = {t} s"))?;
+                Ok(f.to_gaussians())
+            }
+            _ => self.at(t, camera.position.to_array(), language),
+        }
+    }
+
     /// Frame rate and frame count of a `.dlgs` stream (`None` for a still scene file).
     pub fn timing(&self) -> Option<(f64, u32)> {
         match self {

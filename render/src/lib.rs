@@ -8,6 +8,7 @@
 pub mod camera;
 pub mod colour_fit;
 pub mod contribution;
+pub mod cull;
 mod error;
 pub mod fastexp;
 pub mod image_out;

@@ -428,3 +428,61 @@ fn damaged_scaffold_files_give_typed_errors() {
         );
     }
 }
+
+/// Frustum culling of anchors (by the reach of their children) decodes fewer anchors from a
+/// camera close to the scene and renders the same image, bit for bit.
+#[test]
+fn culled_anchors_render_the_same_image() {
+    use dlgs_decoder::scaffold::ScaffoldDecoder;
+    use dlgs_render::{render, Camera, RenderOptions};
+    let mut dec = ScaffoldDecoder::new(
+        std::io::Cursor::new(fixture_file()),
+        dlgs::Limits::default(),
+    )
+    .unwrap();
+    let t = 0.5;
+    let (canon, _) = state_at(0, 1, 0.5);
+    let n = canon.positions.len() as f32;
+    let centre = canon.positions.iter().fold([0f32; 3], |a, p| {
+        [a[0] + p[0] / n, a[1] + p[1] / n, a[2] + p[2] / n]
+    });
+    let mut checked = 0;
+    for (i, cam) in cameras().into_iter().enumerate() {
+        // Half-way from the fixture camera to the scene centre: part of the scene is outside.
+        let eye = glam::Vec3::from_array(cam).lerp(glam::Vec3::from_array(centre), 0.6);
+        let target = glam::Vec3::from_array(centre) + glam::Vec3::new(0.3, 0.0, 0.0);
+        let camera = Camera::look_at(eye, target, glam::Vec3::new(0.0, -1.0, 0.0), 320, 240, 60.0);
+        let in_view = |p: &[[f32; 3]], r: &[f32]| dlgs_render::cull::spheres_in_view(&camera, p, r);
+        let (culled, kept) = dec
+            .frame_in_view(t, eye.to_array(), false, &in_view)
+            .unwrap();
+        let all = dec
+            .frame_at(
+                t,
+                &ViewRequest {
+                    camera_center: eye.to_array(),
+                    language: false,
+                    visible: None,
+                },
+            )
+            .unwrap();
+        assert!(culled.len() <= all.len());
+        let opts = RenderOptions::default();
+        let a = render(&culled.to_gaussians(), &camera, &opts).unwrap();
+        let b = render(&all.to_gaussians(), &camera, &opts).unwrap();
+        let differ: Vec<usize> = (0..a.color.len())
+            .filter(|&k| a.color[k] != b.color[k])
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "camera {i}: {} values differ, first at pixel ({}, {})",
+            differ.len(),
+            differ[0] / 3 % 320,
+            differ[0] / 3 / 320
+        );
+        if kept < canon.positions.len() {
+            checked += 1;
+        }
+    }
+    assert!(checked > 0, "no camera culled anything");
+}

@@ -142,4 +142,30 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let (positions, state) = gop.anchors_at(tp.key, tp.delta);
         Ok(neural_gaussians(&positions, &state, &gop.mlps, view))
     }
+
+    /// As [`Self::frame_at`], decoding only the anchors `in_view(positions, reach)` keeps: it
+    /// gets every anchor's position at `t` and how far its children can reach
+    /// ([`super::anchor_reach`]), e.g. a frustum test. Returns the frame and the anchors kept.
+    pub fn frame_in_view(
+        &mut self,
+        t: f64,
+        camera_center: [f32; 3],
+        language: bool,
+        in_view: &dyn Fn(&[[f32; 3]], &[f32]) -> Vec<bool>,
+    ) -> Result<(NeuralGaussians, usize)> {
+        let tp = self.scene().locate(t)?;
+        let gop = self.gop(tp.gop)?;
+        let (positions, state) = gop.anchors_at(tp.key, tp.delta);
+        let visible = in_view(&state.positions, &super::anchor_reach(&state));
+        if visible.len() != state.len() {
+            return Err(Error::request("the view test must answer once per anchor"));
+        }
+        let kept = visible.iter().filter(|&&v| v).count();
+        let view = ViewRequest {
+            camera_center,
+            language,
+            visible: Some(&visible),
+        };
+        Ok((neural_gaussians(&positions, &state, &gop.mlps, &view), kept))
+    }
 }

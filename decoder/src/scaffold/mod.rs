@@ -10,4 +10,4 @@ mod neural;
 pub use anchor_deform::deform_anchors;
 pub use file::{ScaffoldDecoder, ScaffoldGop};
 pub use mlp::{activate, eval as eval_mlp};
-pub use neural::{neural_gaussians, NeuralGaussians, ViewRequest};
+pub use neural::{anchor_reach, neural_gaussians, NeuralGaussians, ViewRequest};

@@ -212,3 +212,26 @@ impl NeuralGaussians {
         g
     }
 }
+
+/// How far any child of each anchor can reach from the anchor's position: the longest scaled
+/// offset plus 3 of the largest child scale (`exp(s[3..6])` bounds every child's scale, the
+/// logistic factor being below 1). Children never reach outside, so culling anchors by these
+/// spheres (against a view frustum) never drops a child the view shows.
+pub fn anchor_reach(anchors: &Anchors) -> Vec<f32> {
+    (0..anchors.len())
+        .map(|a| {
+            let s = anchors.log_scaling(a);
+            let e: [f32; 6] = std::array::from_fn(|d| exp(s[d] as f64) as f32);
+            let off = anchors.offset(a);
+            let far = (0..N_OFFSETS)
+                .map(|k| {
+                    (0..3)
+                        .map(|d| (off[3 * k + d] * e[d]).powi(2))
+                        .sum::<f32>()
+                        .sqrt()
+                })
+                .fold(0.0f32, f32::max);
+            far + 3.0 * e[3].max(e[4]).max(e[5])
+        })
+        .collect()
+}
