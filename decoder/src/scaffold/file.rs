@@ -57,6 +57,9 @@ impl ScaffoldGop {
     }
 }
 
+/// A view test: given every anchor's position and reach, which anchors to decode.
+pub type InView<'a> = dyn Fn(&[[f32; 3]], &[f32]) -> Vec<bool> + 'a;
+
 /// Decodes GOPs and camera-dependent frames from a seekable Scaffold-GS `.dlgs` source.
 pub struct ScaffoldDecoder<R: Read + Seek> {
     reader: FileReader<R>,
@@ -151,7 +154,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         t: f64,
         camera_center: [f32; 3],
         language: bool,
-        in_view: &dyn Fn(&[[f32; 3]], &[f32]) -> Vec<bool>,
+        in_view: &InView,
     ) -> Result<(NeuralGaussians, usize)> {
         let tp = self.scene().locate(t)?;
         let gop = self.gop(tp.gop)?;

@@ -8,6 +8,6 @@ mod mlp;
 mod neural;
 
 pub use anchor_deform::deform_anchors;
-pub use file::{ScaffoldDecoder, ScaffoldGop};
+pub use file::{InView, ScaffoldDecoder, ScaffoldGop};
 pub use mlp::{activate, eval as eval_mlp};
 pub use neural::{anchor_reach, neural_gaussians, NeuralGaussians, ViewRequest};

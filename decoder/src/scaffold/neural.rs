@@ -226,7 +226,10 @@ pub fn anchor_reach(anchors: &Anchors) -> Vec<f32> {
             let far = (0..N_OFFSETS)
                 .map(|k| {
                     (0..3)
-                        .map(|d| (off[3 * k + d] * e[d]).powi(2))
+                        .map(|d| {
+                            let v = off[3 * k + d] * e[d];
+                            v * v
+                        })
                         .sum::<f32>()
                         .sqrt()
                 })
