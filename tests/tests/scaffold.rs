@@ -486,3 +486,108 @@ fn culled_anchors_render_the_same_image() {
     }
     assert!(checked > 0, "no camera culled anything");
 }
+
+/// A tiny Scaffold-GS model (2 static + 1 dynamic anchors, hidden widths 2): seeds for the
+/// fuzzer and a round trip that needs no fixture.
+fn tiny_file() -> Vec<u8> {
+    use dlgs::chunks::tfea::TfeaBody;
+    use dlgs::model::scaffold::{Activation, AnchorDeformMlps, AnchorDeformation, Dense, TwoLayer};
+    use dlgs_encoder::scaffold::{scaffold_scene, ScaffoldWriter};
+    let mut rng = fastrand::Rng::with_seed(7);
+    let mut layer = |i: usize, h: usize, o: usize, biased: bool, output: Activation| {
+        let mut d = |i: usize, o: usize| Dense {
+            inputs: i,
+            outputs: o,
+            weights: (0..i * o).map(|_| rng.f32() - 0.5).collect(),
+            bias: biased.then(|| (0..o).map(|_| rng.f32() - 0.3).collect()),
+        };
+        TwoLayer {
+            first: d(i, h),
+            second: d(h, o),
+            output,
+        }
+    };
+    let mlps = ScaffoldMlps {
+        opacity: layer(54, 2, 20, true, Activation::Tanh),
+        color: layer(54, 2, 30, true, Activation::Sigmoid),
+        cov: layer(54, 2, 70, true, Activation::Identity),
+        language: Some(layer(54, 2, 90, true, Activation::Identity)),
+    };
+    let deformation = AnchorDeformation {
+        bound_min: [-1.0; 3],
+        bound_max: [1.0; 3],
+        mlps: AnchorDeformMlps {
+            position: layer(19, 2, 3, false, Activation::Identity),
+            feature: layer(16, 2, 50, false, Activation::Identity),
+            offsets: layer(16, 2, 30, false, Activation::Identity),
+            scaling: layer(16, 2, 6, false, Activation::Identity),
+        },
+    };
+    let set = |n: usize| Anchors {
+        positions: (0..n).map(|i| [0.1 * i as f32, 0.2, 0.3]).collect(),
+        features: vec![0.4; n * FEAT_DIM],
+        offsets: vec![0.1; n * 3 * N_OFFSETS],
+        log_scalings: vec![-2.0; n * SCALING_DIM],
+    };
+    let canonical = dlgs::model::scaffold::ScaffoldCanonical {
+        statics: set(2),
+        dynamics: set(1),
+    };
+    let features = TimeFeatures {
+        n: 1,
+        keys: 7,
+        channels: 16,
+        data: (0..7 * 16).map(|i| i as f32 * 0.01).collect(),
+    };
+    let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
+    let mut w = ScaffoldWriter::new(Vec::new(), scene, 19).unwrap();
+    w.push_gop(
+        &canonical,
+        &mlps,
+        Some((&deformation, &TfeaBody::Exact(features))),
+    )
+    .unwrap();
+    w.finish().unwrap()
+}
+
+#[test]
+fn a_tiny_scaffold_file_decodes() {
+    use dlgs_decoder::scaffold::ScaffoldDecoder;
+    let bytes = tiny_file();
+    assert!(bytes.len() < 65536, "{} bytes: a fuzzer seed", bytes.len());
+    let mut dec = ScaffoldDecoder::new(std::io::Cursor::new(bytes), dlgs::Limits::tiny()).unwrap();
+    let f = dec
+        .frame_at(
+            1.0,
+            &ViewRequest {
+                camera_center: [0.0, 0.0, -3.0],
+                language: true,
+                visible: None,
+            },
+        )
+        .unwrap();
+    assert_eq!(f.lang.len(), 9 * f.len());
+    assert!(f.opacity.iter().all(|&o| o > 0.0 && o < 1.0));
+    if std::env::var("DLGS_WRITE_FUZZ_SEEDS").is_ok() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus/scaffold_payloads");
+        std::fs::create_dir_all(&dir).unwrap();
+        let bytes = tiny_file();
+        let mut file = vec![3u8];
+        file.extend_from_slice(&bytes);
+        std::fs::write(dir.join("tiny_file"), file).unwrap();
+        // Each chunk's payload behind its selector.
+        let r = dlgs::container::FileReader::open(std::io::Cursor::new(bytes.clone())).unwrap();
+        let mut r = r;
+        for c in r.gop_chunks(0).unwrap() {
+            let sel = match c.ty.as_str() {
+                "ANCR" => 0u8,
+                "AMLP" => 1,
+                "ADEF" => 2,
+                _ => continue,
+            };
+            let mut seed = vec![sel];
+            seed.extend_from_slice(&r.payload(&c).unwrap());
+            std::fs::write(dir.join(c.ty.as_str()), seed).unwrap();
+        }
+    }
+}
