@@ -59,7 +59,7 @@ pub fn read_f32(obj: &Bound<'_, PyAny>, what: &str) -> Res<(Vec<f32>, Vec<usize>
 }
 
 fn rows<const W: usize>(v: Vec<f32>, what: &str) -> Res<Vec<[f32; W]>> {
-    if v.len() % W != 0 {
+    if !v.len().is_multiple_of(W) {
         return Err(input(format!("{what}: length is not a multiple of {W}")));
     }
     Ok(v.chunks_exact(W)

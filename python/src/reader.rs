@@ -386,6 +386,28 @@ impl Reader {
         Ok(list)
     }
 
+    /// Seconds each `frame_at(t)` of the Rust decoder takes for `times` (new buffers, no
+    /// merge, no numpy: the baseline `frame` is measured against; see docs/benchmarks/python.md).
+    #[pyo3(signature = (times, language=false))]
+    fn time_frame_at(&self, py: Python<'_>, times: Vec<f64>, language: bool) -> Res<Vec<f64>> {
+        let opts = FrameOptions {
+            camera_center: [0.0; 3],
+            language: language && self.scene.lang_width() > 0,
+        };
+        py.allow_threads(|| {
+            let mut d = lock(&self.dec);
+            let mut out = Vec::with_capacity(times.len());
+            for &t in &times {
+                let start = std::time::Instant::now();
+                let f = d.frame_at(t, &opts)?;
+                out.push(start.elapsed().as_secs_f64());
+                drop(std::hint::black_box(f));
+            }
+            Ok(out)
+        })
+        .py_err()
+    }
+
     /// Iterate over `(t, frame)` for every frame of the stream.
     fn __iter__(slf: Py<Self>, py: Python<'_>) -> FrameIter {
         let end = slf.get().scene.frame_count;

@@ -64,7 +64,7 @@ fn is_dlgs(p: &Path) -> bool {
 
 /// Gaussians of a scene file (or a `.dlgs` at `t`) for each camera position.
 enum Scene {
-    Dlgs(Reader),
+    Dlgs(Box<Reader>),
     Splat(Gaussians),
 }
 
@@ -72,7 +72,7 @@ impl Scene {
     fn open(py: Python<'_>, p: &Path) -> Res<Scene> {
         if is_dlgs(p) {
             let path = p.to_path_buf().into_pyobject(py)?;
-            Ok(Scene::Dlgs(open_reader(py, &path)?))
+            Ok(Scene::Dlgs(Box::new(open_reader(py, &path)?)))
         } else {
             let p = p.to_path_buf();
             let g = py

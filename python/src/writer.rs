@@ -93,7 +93,7 @@ fn header(o: &StreamOptions, first: &Gop, gops: u32) -> Res<SceneHeader> {
     let key_interval = match dy {
         Some(d) if d.features.keys >= 2 => {
             let k = d.features.keys as u32 - 1;
-            if o.gop_length % k != 0 {
+            if !o.gop_length.is_multiple_of(k) {
                 return Err(input(format!(
                     "time_features have {} keys: gop_length {} is not a multiple of {k}",
                     d.features.keys, o.gop_length
@@ -247,7 +247,7 @@ impl Writer {
             (None, None) => None,
             _ => return Err(input("give time_features and decoders together")),
         };
-        if (dynamic_gop.is_some()) != !canonical.dynamics.is_empty() {
+        if dynamic_gop.is_some() == canonical.dynamics.is_empty() {
             return Err(input(
                 "a GOP with dynamic Gaussians needs time_features and decoders (and only then)",
             ));

@@ -1,0 +1,117 @@
+"""numpy -> Writer -> .dlgs -> frame(t): exact for lossless settings; the bytes are the CLI's."""
+
+import numpy as np
+import pytest
+
+import dlgs
+from conftest import run_cli
+
+KEYS = ("positions", "log_scales", "rotations", "opacities", "sh", "lang_features", "lang_opacities")
+
+
+def assert_same(a: dict, b: dict):
+    assert set(a) == set(b)
+    for k in a:
+        assert a[k].dtype == np.float32 and a[k].shape == b[k].shape, k
+        assert np.array_equal(a[k].view(np.uint32), b[k].view(np.uint32)), k
+
+
+def random_scene(n, sh_coeffs=4, lang=9, seed=0):
+    rng = np.random.default_rng(seed)
+    s = {
+        "positions": rng.normal(size=(n, 3)).astype(np.float32),
+        "log_scales": rng.normal(-4, 0.5, size=(n, 3)).astype(np.float32),
+        "rotations": rng.normal(size=(n, 4)).astype(np.float32),
+        "opacities": rng.normal(size=n).astype(np.float32),
+        "sh": rng.normal(0, 0.3, size=(n, sh_coeffs, 3)).astype(np.float32),
+    }
+    if lang:
+        s["lang_features"] = rng.normal(size=(n, lang)).astype(np.float32)
+        s["lang_opacities"] = rng.normal(size=n).astype(np.float32)
+    return s
+
+
+def test_still_lossless_round_trip(work):
+    scene = random_scene(5000)
+    path = work / "still.dlgs"
+    with dlgs.Writer(path, quality="lossless") as w:
+        w.write_gop(scene)
+    r = dlgs.open(path)
+    assert r.info["n_static"] == 5000 and r.info["frame_count"] == 1
+    assert r.info["sh_degree"] == 1 and r.info["lang_width"] == 9
+    assert_same(r.frame(0.0, language=True), scene)
+    # float64 and non-contiguous inputs are converted, not refused
+    s64 = {k: np.asfortranarray(v.astype(np.float64)) for k, v in scene.items()}
+    with dlgs.Writer(work / "still64.dlgs") as w:
+        w.write_gop(s64)
+    assert (work / "still64.dlgs").read_bytes() == path.read_bytes()
+
+
+def test_dynamic_round_trip_exact(dyn_exact, work):
+    """GOPs read as arrays, written back (lossless, exact features): the same arrays, the
+    same frames bit for bit, and the same bytes as `dlgs encode --exact-features`."""
+    src = dlgs.open(dyn_exact)
+    info = src.info
+    gops = [src.gop(g) for g in range(info["gop_count"])]
+    assert gops[0]["time_features"].shape == (info["n_dynamic"], 3, 16)
+    out = work / "rewritten_exact.dlgs"
+    progress = []
+    with dlgs.Writer(out, fps=info["fps"], gop_length=info["gop_length"], exact_features=True,
+                     progress=lambda d, t: progress.append((d, t))) as w:
+        for g in gops:
+            w.write_gop(g["static"], g["dynamic"], g["time_features"], g["decoders"],
+                        g["scale_offsets"])
+    assert progress == [(1, 2), (2, 2)]
+    back = dlgs.open(out)
+    assert back.info == info
+    for g, orig in enumerate(gops):
+        again = back.gop(g)
+        assert_same(again["static"], orig["static"])
+        assert_same(again["dynamic"], orig["dynamic"])
+        assert np.array_equal(again["time_features"], orig["time_features"])
+        for role, layers in orig["decoders"].items():
+            for a, b in zip(again["decoders"][role], layers):
+                assert np.array_equal(a, b)
+    for t in (0.0, 0.1234, 0.5, 0.99, 1.3):
+        for cam in (None, 0, 3):
+            assert_same(back.frame(t, camera=cam, language=True),
+                        src.frame(t, camera=cam, language=True))
+    cli_out = work / "cli_exact.dlgs"
+    run_cli("encode", dyn_exact, "-o", cli_out, "--exact-features", "--no-meta")
+    assert out.read_bytes() == cli_out.read_bytes()
+
+
+def test_dynamic_hevc_same_bytes_as_cli(dyn_exact, work):
+    """crf 6 HEVC time features, streamed (gop_count given): the CLI's bytes."""
+    src = dlgs.open(dyn_exact)
+    info = src.info
+    out = work / "rewritten_hevc.dlgs"
+    w = dlgs.Writer(out, fps=info["fps"], gop_length=info["gop_length"], crf=6,
+                    gop_count=info["gop_count"])
+    for g in range(info["gop_count"]):
+        d = src.gop(g)
+        w.write_gop(d["static"], d["dynamic"], d["time_features"], d["decoders"], d["scale_offsets"])
+        assert not out.exists()
+    size = w.close()
+    cli_out = work / "cli_hevc.dlgs"
+    run_cli("encode", dyn_exact, "-o", cli_out, "--crf", 6, "--no-meta")
+    assert size == cli_out.stat().st_size
+    assert out.read_bytes() == cli_out.read_bytes()
+
+
+def test_writer_refuses_bad_input(work):
+    scene = random_scene(10, lang=0)
+    w = dlgs.Writer(work / "bad.dlgs")
+    bad = dict(scene, positions=scene["positions"][:, :2])
+    with pytest.raises(dlgs.InputError) as e:
+        w.write_gop(bad)
+    assert e.value.kind == "Input" and "positions" in e.value.message
+    with pytest.raises(dlgs.InputError):
+        w.write_gop(scene, dynamic=scene)  # dynamic Gaussians without time features
+    with pytest.raises(dlgs.RequestError):
+        dlgs.Writer(work / "bad2.dlgs", quality="ultra")
+    nan = dict(scene, opacities=np.full(10, np.nan, np.float32))
+    w.write_gop(nan)
+    with pytest.raises(dlgs.DlgsError):
+        w.close()
+    assert not (work / "bad.dlgs").exists()
