@@ -99,8 +99,10 @@ class Writer:
     def __enter__(self) -> "Writer": ...
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool: ...
 
-def open(source: Union[PathLike, bytes, bytearray, memoryview]) -> Reader:
-    """Open a .dlgs file (path) or stream held in memory (bytes-like)."""
+def open(source: Union[PathLike, bytes, bytearray, memoryview],
+         threads: Optional[int] = None) -> Reader:
+    """Open a .dlgs file (path) or stream held in memory (bytes-like). threads: this reader's
+    own worker threads (default: the process-wide pool, one per core)."""
 def read_scene(path: PathLike) -> Frame:
     """Read a PLY, .splat, SPZ or SOG (.sog / meta.json) scene."""
 def write_scene(path: PathLike, scene: Frame, spz_version: int = 3) -> int: ...

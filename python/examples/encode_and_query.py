@@ -60,7 +60,7 @@ def main(labelled: Path, out: Path) -> None:
     print(f"{out}: {out.stat().st_size} bytes, {info['frame_count']} frames, "
           f"{info['n_static']} static + {info['n_dynamic']} dynamic of {n} Gaussians")
 
-    query = np.load(labelled / "category_4.npy")
+    query = np.load(labelled / "category_4.npy").reshape(-1)  # one embedding (D,)
     cam = r.cameras(count=8, width=320, height=240)[0]
     for t in (0.0, 0.5, 1.5):
         a = r.query(query, t, cam)

@@ -34,6 +34,8 @@ pub struct Reader {
     version: (u16, u16),
     /// The static set of the last GOP asked for with `split=True`, shared between frames.
     statics: Mutex<Option<(u32, Py<PyDict>)>>,
+    /// This reader's own worker threads (`open(..., threads=N)`); `None`: the global pool.
+    pool: Option<rayon::ThreadPool>,
 }
 
 fn lock(m: &Mutex<Dec>) -> std::sync::MutexGuard<'_, Dec> {
@@ -43,8 +45,12 @@ fn lock(m: &Mutex<Dec>) -> std::sync::MutexGuard<'_, Dec> {
 
 /// Open a path (str or os.PathLike) or bytes-like object.
 #[pyfunction]
-#[pyo3(name = "open")]
-pub fn open_reader(py: Python<'_>, source: &Bound<'_, PyAny>) -> Res<Reader> {
+#[pyo3(name = "open", signature = (source, threads=None))]
+pub fn open_reader(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    threads: Option<usize>,
+) -> Res<Reader> {
     let src: Box<dyn Source> = if let Ok(b) = source.downcast::<PyBytes>() {
         Box::new(Cursor::new(b.as_bytes().to_vec()))
     } else if let Ok(path) = source.extract::<std::path::PathBuf>() {
@@ -71,6 +77,15 @@ pub fn open_reader(py: Python<'_>, source: &Bound<'_, PyAny>) -> Res<Reader> {
         scene,
         version,
         statics: Mutex::new(None),
+        pool: match threads {
+            None => None,
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n.max(1))
+                    .build()
+                    .map_err(|e| request(format!("threads={n}: {e}")))?,
+            ),
+        },
     })
 }
 
@@ -91,8 +106,16 @@ fn gaussians_at(
 }
 
 impl Reader {
+    /// Run `f` without the GIL, on this reader's pool when it has one.
+    fn detach<T: Send>(&self, py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+        py.allow_threads(|| match &self.pool {
+            Some(p) => p.install(f),
+            None => f(),
+        })
+    }
+
     pub fn canonical(&self, py: Python<'_>, t: f64) -> Res<Gaussians> {
-        py.allow_threads(|| {
+        self.detach(py, || {
             let mut d = lock(&self.dec);
             let gop = d.scene().locate(t)?.gop;
             Ok(d.gop_canonical(gop)?.merged())
@@ -119,8 +142,10 @@ impl Reader {
         centre: [f32; 3],
         language: bool,
     ) -> Res<Gaussians> {
-        py.allow_threads(|| gaussians_at(&mut lock(&self.dec), t, centre, language))
-            .py_err()
+        self.detach(py, || {
+            gaussians_at(&mut lock(&self.dec), t, centre, language)
+        })
+        .py_err()
     }
 
     /// The frame at `t` as one dict (static then dynamic) or split.
@@ -137,13 +162,13 @@ impl Reader {
             language: language && self.scene.lang_width() > 0,
         };
         if !split {
-            let g = py
-                .allow_threads(|| Ok(lock(&self.dec).frame_at(t, &opts)?.merged()))
+            let g = self
+                .detach(py, || Ok(lock(&self.dec).frame_at(t, &opts)?.merged()))
                 .py_err()?;
             return gaussians_to_dict(py, g);
         }
-        let frame = py
-            .allow_threads(|| lock(&self.dec).frame_at(t, &opts))
+        let frame = self
+            .detach(py, || lock(&self.dec).frame_at(t, &opts))
             .py_err()?;
         let gop = frame.time.gop;
         let mut cache = self.statics.lock().unwrap_or_else(|e| e.into_inner());
@@ -239,7 +264,7 @@ impl Reader {
     ) -> Res<Bound<'py, PyAny>> {
         let cam = self.resolve(py, camera, t, width, height)?;
         let bg = [background.0, background.1, background.2];
-        let img = py.allow_threads(|| {
+        let img = self.detach(py, || {
             let g = gaussians_at(&mut lock(&self.dec), t, cam.position.to_array(), features)
                 .map_err(to_py)?;
             view::render_arrays(&g, &cam, features, bg)
@@ -287,8 +312,8 @@ impl Reader {
             Some(p) => {
                 dlgs_query::decoder_io::load_lang_decoder(&p).map_err(crate::errors::other)?
             }
-            None => py
-                .allow_threads(|| lock(&self.dec).lang_decoder())
+            None => self
+                .detach(py, || lock(&self.dec).lang_decoder())
                 .py_err()?
                 .ok_or_else(|| {
                     request("the stream has no language decoder (LAED): pass lang_decoder")
@@ -321,7 +346,7 @@ impl Reader {
             self.scene.lang_levels as usize,
             self.scene.lang_dims as usize,
         );
-        let answers = py.allow_threads(|| {
+        let answers = self.detach(py, || {
             let g = gaussians_at(&mut lock(&self.dec), t, cam.position.to_array(), true)
                 .map_err(to_py)?;
             view::query_arrays(&g, &cam, &dec, &positives, &negatives, shape, &params)
@@ -356,8 +381,8 @@ impl Reader {
     /// GOP `g` as a trained model holds it: canonical static and dynamic sets, key time
     /// features (N_dyn, K, 16) and decoder weights (what `Writer.write_gop` takes).
     fn gop<'py>(&self, py: Python<'py>, g: u32) -> Res<Bound<'py, PyDict>> {
-        let (gop, dynamic) = py
-            .allow_threads(|| {
+        let (gop, dynamic) = self
+            .detach(py, || {
                 let gop = lock(&self.dec).gop(g)?;
                 let dynamic = gop.dynamic()?;
                 Ok((gop, dynamic))
@@ -394,7 +419,7 @@ impl Reader {
             camera_center: [0.0; 3],
             language: language && self.scene.lang_width() > 0,
         };
-        py.allow_threads(|| {
+        self.detach(py, || {
             let mut d = lock(&self.dec);
             let mut out = Vec::with_capacity(times.len());
             for &t in &times {

@@ -1,6 +1,7 @@
-"""Measure: N renders (frame decode + render, 320x240) one after another in one thread,
-against N/2 in each of two threads with their own readers. Prints the times and speed-up.
-Run with RAYON_NUM_THREADS=1 so that each call uses one core (tests/test_threads.py)."""
+"""Measure: N frame decodes + renders (320x240) in one thread, against N/2 in each of two
+threads. Every reader has one worker thread of its own (`threads=1`), so the two Python
+threads are the only parallelism: with the GIL held the speed-up would be about 1.
+Prints the times and the speed-up (tests/test_threads.py, docs/benchmarks/python.md)."""
 
 import sys
 import threading
@@ -10,7 +11,7 @@ import dlgs
 
 path = sys.argv[1]
 N = int(sys.argv[2]) if len(sys.argv) > 2 else 24
-readers = [dlgs.open(path), dlgs.open(path)]
+readers = [dlgs.open(path, threads=1), dlgs.open(path, threads=1)]
 cam = readers[0].cameras(count=1, width=320, height=240)[0]
 times = [0.6 * i / N for i in range(N)]
 

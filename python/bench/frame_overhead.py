@@ -1,0 +1,51 @@
+"""Overhead of `Reader.frame(t)` over the Rust decoder's `frame_at(t)` on the same file, in
+the same process and decoder (docs/benchmarks/python.md).
+
+    python python/bench/frame_overhead.py MODEL.dlgs [REPEATS]
+
+MODEL: the frame_at bench's model, e.g.
+    dlgs synth ../shared/data/splat/marcelpadilla_plant.splat -o bench80k.dlgs \
+        --dynamic-fraction 0.75 --max-dynamic 80000 --language --exact-features
+Each row: median seconds per call over REPEATS x 30 times inside GOP 0 (no GOP decode in the
+timed calls), interleaving the Rust baseline and the Python call so that machine noise hits
+both alike.
+"""
+
+import statistics
+import sys
+import time
+
+import dlgs
+
+path = sys.argv[1]
+repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 5
+r = dlgs.open(path)
+info = r.info
+gop_seconds = info["gop_length"] / info["fps"]
+times = [gop_seconds * 0.95 * i / 30 for i in range(30)]
+r.frame(0.0)  # decode GOP 0 once
+
+
+def timed(f):
+    out = []
+    for t in times:
+        t0 = time.perf_counter()
+        f(t)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+print(f"{path}: {info['n_static']} static + {info['n_dynamic']} dynamic, SH {info['sh_degree']}, "
+      f"language {info['lang_width']}")
+print("| what | Rust frame_at | Python frame(t) | overhead |")
+print("|---|---|---|---|")
+for language in (False, True):
+    for split in (False, True):
+        rust, py = [], []
+        for _ in range(repeats):
+            rust += r.time_frame_at(times, language)
+            py += timed(lambda t: r.frame(t, language=language, split=split))
+        a, b = statistics.median(rust), statistics.median(py)
+        what = ("colour + language" if language else "colour") + (
+            ", split (static shared)" if split else ", merged (static + dynamic copied)")
+        print(f"| {what} | {a * 1e3:.2f} ms | {b * 1e3:.2f} ms | {100 * (b / a - 1):+.1f} % |")
