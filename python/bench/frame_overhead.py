@@ -7,8 +7,8 @@ MODEL: the frame_at bench's model, e.g.
     dlgs synth ../shared/data/splat/marcelpadilla_plant.splat -o bench80k.dlgs \
         --dynamic-fraction 0.75 --max-dynamic 80000 --language --exact-features
 Each row: median seconds per call over REPEATS x 30 times inside GOP 0 (no GOP decode in the
-timed calls), interleaving the Rust baseline and the Python call so that machine noise hits
-both alike.
+timed calls), interleaving the Rust baseline and the Python call per t so that machine noise
+hits both alike.
 """
 
 import statistics
@@ -26,13 +26,17 @@ times = [gop_seconds * 0.95 * i / 30 for i in range(30)]
 r.frame(0.0)  # decode GOP 0 once
 
 
-def timed(f):
-    out = []
+def interleaved(language, split):
+    """Per t: the Rust call (timed inside Rust), then the Python call (timed here). Both
+    exclude freeing the frame (Rust drops it after its clock stops; here after ours)."""
+    rust, py = [], []
     for t in times:
+        rust += r.time_frame_at([t], language)
         t0 = time.perf_counter()
-        f(t)
-        out.append(time.perf_counter() - t0)
-    return out
+        res = r.frame(t, language=language, split=split)
+        py.append(time.perf_counter() - t0)
+        del res
+    return rust, py
 
 
 print(f"{path}: {info['n_static']} static + {info['n_dynamic']} dynamic, SH {info['sh_degree']}, "
@@ -43,8 +47,9 @@ for language in (False, True):
     for split in (False, True):
         rust, py = [], []
         for _ in range(repeats):
-            rust += r.time_frame_at(times, language)
-            py += timed(lambda t: r.frame(t, language=language, split=split))
+            a, b = interleaved(language, split)
+            rust += a
+            py += b
         a, b = statistics.median(rust), statistics.median(py)
         what = ("colour + language" if language else "colour") + (
             ", split (static shared)" if split else ", merged (static + dynamic copied)")

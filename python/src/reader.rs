@@ -36,6 +36,8 @@ pub struct Reader {
     statics: Mutex<Option<(u32, Py<PyDict>)>>,
     /// This reader's own worker threads (`open(..., threads=N)`); `None`: the global pool.
     pool: Option<rayon::ThreadPool>,
+    /// The last merged frame's dynamic buffers, decoded into again by the next one.
+    reuse: Mutex<Option<Gaussians>>,
 }
 
 fn lock(m: &Mutex<Dec>) -> std::sync::MutexGuard<'_, Dec> {
@@ -77,6 +79,7 @@ pub fn open_reader(
         scene,
         version,
         statics: Mutex::new(None),
+        reuse: Mutex::new(None),
         pool: match threads {
             None => None,
             Some(n) => Some(
@@ -102,7 +105,7 @@ fn gaussians_at(
             language,
         },
     )?;
-    Ok(f.merged())
+    Ok(crate::arrays::merged(f.statics(), &f.dynamics))
 }
 
 impl Reader {
@@ -163,7 +166,20 @@ impl Reader {
         };
         if !split {
             let g = self
-                .detach(py, || Ok(lock(&self.dec).frame_at(t, &opts)?.merged()))
+                .detach(py, || {
+                    // The dynamic set is decoded into the previous frame's buffers (warm
+                    // pages, as a player's `frame_at_reusing`), then copied once with the
+                    // static set into the arrays handed to Python.
+                    let mut reuse = self.reuse.lock().unwrap_or_else(|e| e.into_inner());
+                    let f = lock(&self.dec).frame_at_reusing(
+                        t,
+                        &opts,
+                        reuse.take().unwrap_or_default(),
+                    )?;
+                    let g = crate::arrays::merged(f.statics(), &f.dynamics);
+                    *reuse = Some(f.dynamics);
+                    Ok(g)
+                })
                 .py_err()?;
             return gaussians_to_dict(py, g);
         }
