@@ -10,6 +10,8 @@ mod camera;
 mod config;
 mod errors;
 mod gop_dict;
+#[cfg(feature = "hevc")]
+mod gop_input;
 mod reader;
 mod scenes;
 mod view;

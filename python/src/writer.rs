@@ -18,7 +18,7 @@ use pyo3::types::PyDict;
 
 use crate::config::CodecOptions;
 use crate::errors::{input, request, to_py, IntoPy, Res};
-use crate::gop_dict::{canonical_from_py, dynamic_from_py};
+use crate::gop_input::{canonical_from_py, dynamic_from_py};
 
 type Out = BufWriter<File>;
 type Gop = (Canonical, Option<DynamicGop>);
