@@ -20,4 +20,4 @@ WHEEL=$(ls "$WORK"/wheels/dlgs-*.whl)
 echo "wheel: $(basename "$WHEEL"), $(stat -c %s "$WHEEL") bytes"
 python3 -m venv "$WORK/test"
 "$WORK/test/bin/pip" install -q "$WHEEL" pytest
-(cd python/tests && "$WORK/test/bin/python" -m pytest -q -p no:cacheprovider .)
+(cd python/tests && "$WORK/test/bin/python" -m pytest -q -rs -p no:cacheprovider .)
