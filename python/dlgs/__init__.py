@@ -62,8 +62,8 @@ def _gaussians(d: Optional[Mapping[str, Any]]) -> Optional[dict]:
 
 
 def write_scene(path: Union[str, os.PathLike], scene: Mapping[str, Any], spz_version: int = 3) -> int:
-    """Write ``scene`` (dict of arrays, as :func:`read_scene` returns) as INRIA PLY (``.ply``)
-    or SPZ (``.spz``, v3 or v2). Returns the bytes written."""
+    """Write ``scene`` (dict of arrays, as :func:`read_scene` returns) as INRIA PLY (``.ply``),
+    SPZ (``.spz``, v3 or v2) or antimatter15 ``.splat``. Returns the bytes written."""
     return _dlgs.write_scene(path, _gaussians(scene), spz_version)
 
 

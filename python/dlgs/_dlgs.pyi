@@ -105,9 +105,11 @@ def open(source: Union[PathLike, bytes, bytearray, memoryview],
     own worker threads (default: the process-wide pool, one per core)."""
 def read_scene(path: PathLike) -> Frame:
     """Read a PLY, .splat, SPZ or SOG (.sog / meta.json) scene."""
-def write_scene(path: PathLike, scene: Frame, spz_version: int = 3) -> int: ...
+def write_scene(path: PathLike, scene: Frame, spz_version: int = 3) -> int:
+    """Write .ply (with language extras), .spz (v3 or v2) or .splat; returns the bytes."""
 def encode_scene(scene: Frame, path: PathLike, quality: str = "high", zstd_level: int = 9,
-                 meta: Any = None) -> int: ...
+                 meta: Any = None) -> int:
+    """Encode a still scene as `dlgs encode SCENE -o PATH --no-meta`; returns the size."""
 def compare(a: PathLike, b: PathLike, cameras: Optional[Sequence[Camera]] = None,
             t: float = 0.0, background: Tuple[float, float, float] = (1.0, 1.0, 1.0)
             ) -> Dict[str, Any]:

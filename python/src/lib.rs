@@ -14,6 +14,7 @@ mod gop_dict;
 mod gop_input;
 mod reader;
 mod scenes;
+mod splat_write;
 mod view;
 #[cfg(feature = "hevc")]
 mod writer;

@@ -22,8 +22,8 @@ pub fn read_scene<'py>(py: Python<'py>, path: PathBuf) -> Res<Bound<'py, PyDict>
     gaussians_to_dict(py, g)
 }
 
-/// Write a dict of arrays as INRIA PLY (`.ply`, with the language extras when present) or SPZ
-/// (`.spz`, v3; `spz_version=2` for v2). Returns the bytes written.
+/// Write a dict of arrays as INRIA PLY (`.ply`, with the language extras when present), SPZ
+/// (`.spz`, v3; `spz_version=2` for v2) or antimatter15 `.splat`. Returns the bytes written.
 #[pyfunction]
 #[pyo3(signature = (path, scene, spz_version=3))]
 pub fn write_scene(
@@ -47,8 +47,9 @@ pub fn write_scene(
         .allow_threads(|| match ext.as_str() {
             "ply" => dlgs::interop::ply::write_ply(&g),
             "spz" => write_spz(&g, version),
+            "splat" => Ok(crate::splat_write::write_splat(&g)),
             other => Err(dlgs::Error::request(format!(
-                "writing `.{other}`: the bindings write .ply and .spz (.splat and SOG are read only)"
+                "writing `.{other}`: the bindings write .ply, .spz and .splat (SOG is read only)"
             ))),
         })
         .py_err()?;
