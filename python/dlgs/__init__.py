@@ -61,6 +61,16 @@ def _gaussians(d: Optional[Mapping[str, Any]]) -> Optional[dict]:
     return {k: _f32(v) for k, v in d.items() if k in _GAUSSIAN_KEYS and v is not None}
 
 
+def _residual_field(f: Optional[Mapping[str, Any]]) -> Optional[dict]:
+    if f is None:
+        return None
+    out = dict(f)
+    out["planes"] = [np.ascontiguousarray(p, dtype=np.uint8) for p in f["planes"]]
+    out["gate"] = np.ascontiguousarray(f["gate"], dtype=np.uint8)
+    out["mlp"] = {k: _f32(v) for k, v in f["mlp"].items()}
+    return out
+
+
 def write_scene(path: Union[str, os.PathLike], scene: Mapping[str, Any], spz_version: int = 3) -> int:
     """Write ``scene`` (dict of arrays, as :func:`read_scene` returns) as INRIA PLY (``.ply``),
     SPZ (``.spz``, v3 or v2) or antimatter15 ``.splat``. Returns the bytes written."""
@@ -122,21 +132,26 @@ if HAS_HEVC:
 
         def write_gop(
             self,
-            static: Mapping[str, Any],
+            static: Optional[Mapping[str, Any]] = None,
             dynamic: Optional[Mapping[str, Any]] = None,
             time_features: Any = None,
             decoders: Optional[Mapping[str, Sequence[Any]]] = None,
             scale_offsets: Optional[bool] = None,
+            residual_field: Optional[Mapping[str, Any]] = None,
         ) -> None:
             """Append the next GOP: canonical ``static`` and ``dynamic`` sets (dicts of
             arrays), key ``time_features`` (N_dyn, K, 16) and ``decoders`` (role -> list of
             bias-free (out, in) weight matrices; roles deform, cov, opacity, color, lang).
-            ``scale_offsets`` defaults to the reference's rule: from GOP 1 on."""
+            ``scale_offsets`` defaults to the reference's rule: from GOP 1 on.
+            In sequential/parallel scenes a GOP after the first may instead give its binary
+            voxel residual field (``residual_field``, as :meth:`Reader.gop` returns it; no
+            canonical sets): it is stored as it is (``RNTC``)."""
             dec = None
             if decoders is not None:
                 dec = {k: [_f32(w) for w in v] for k, v in decoders.items()}
             tf = None if time_features is None else _f32(time_features)
-            self._w.write_gop(_gaussians(static), _gaussians(dynamic), tf, dec, scale_offsets)
+            self._w.write_gop(_gaussians(static), _gaussians(dynamic), tf, dec, scale_offsets,
+                              _residual_field(residual_field))
 
         def close(self) -> int:
             """Finish the file and move it into place; returns its size in bytes."""

@@ -71,7 +71,8 @@ class Reader:
         level (chosen, 0-based), mask (H,W) bool. A (K,D) embedding gives a list of K."""
     def gop(self, g: int) -> Dict[str, Any]:
         """GOP g as Writer.write_gop takes it: static, dynamic, time_features (N_dyn,K,16),
-        decoders (role -> [(out,in) weights]), scale_offsets."""
+        decoders (role -> [(out,in) weights]), scale_offsets, and residual_field (planes,
+        gate, mlp, shapes, bounds, groups, sets) when the GOP is stored as RNTC."""
     def cameras(self, count: int = 8, width: int = 1352, height: int = 1014,
                 t: float = 0.0) -> List[CameraJson]:
         """The orbit `dlgs cameras` writes, as cameras.json entries."""
@@ -91,10 +92,11 @@ class Writer:
                  frame_count: Optional[int], meta: Any, lang_decoder: Optional[PathLike],
                  negatives: Optional[F32], progress: Optional[Callable[[int, int], Any]]
                  ) -> None: ...
-    def write_gop(self, static_set: Frame, dynamic: Optional[Frame] = None,
+    def write_gop(self, static_set: Optional[Frame] = None, dynamic: Optional[Frame] = None,
                   time_features: Optional[F32] = None,
                   decoders: Optional[Mapping[str, Sequence[F32]]] = None,
-                  scale_offsets: Optional[bool] = None) -> None: ...
+                  scale_offsets: Optional[bool] = None,
+                  residual_field: Optional[Mapping[str, Any]] = None) -> None: ...
     def close(self) -> int: ...
     def __enter__(self) -> "Writer": ...
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool: ...

@@ -14,8 +14,12 @@ pub fn gop_to_dict<'py>(
     py: Python<'py>,
     canonical: &Canonical,
     dynamic: Option<DynamicGop>,
+    ntc: Option<&dlgs::model::ntc::NtcField>,
 ) -> Res<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
+    if let Some(f) = ntc {
+        d.set_item("residual_field", crate::ntc_dict::ntc_to_dict(py, f)?)?;
+    }
     d.set_item("static", gaussians_to_dict(py, canonical.statics.clone())?)?;
     d.set_item(
         "dynamic",

@@ -12,6 +12,7 @@ mod errors;
 mod gop_dict;
 #[cfg(feature = "hevc")]
 mod gop_input;
+mod ntc_dict;
 mod reader;
 mod scenes;
 mod splat_write;

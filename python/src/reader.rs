@@ -404,7 +404,7 @@ impl Reader {
                 Ok((gop, dynamic))
             })
             .py_err()?;
-        gop_to_dict(py, &gop.canonical, dynamic)
+        gop_to_dict(py, &gop.canonical, dynamic, gop.ntc.as_deref())
     }
 
     /// The orbit cameras `dlgs render`/`dlgs cameras` place around the scene at `t`, as 3DGS

@@ -10,9 +10,10 @@ use std::sync::Mutex;
 
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::SceneHeader;
+use dlgs::model::ntc::NtcField;
 use dlgs::model::DynamicGop;
 use dlgs::Canonical;
-use dlgs_encoder::{EncoderConfig, StreamEncoder};
+use dlgs_encoder::{EncoderConfig, GopCanonical, StreamEncoder};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -21,7 +22,12 @@ use crate::errors::{input, request, to_py, IntoPy, Res};
 use crate::gop_input::{canonical_from_py, dynamic_from_py};
 
 type Out = BufWriter<File>;
-type Gop = (Canonical, Option<DynamicGop>);
+/// A GOP's canonical part: its full state, or a binary voxel residual field (`RNTC`).
+enum Canon {
+    State(Box<Canonical>),
+    Ntc(Box<NtcField>),
+}
+type Gop = (Canon, Option<DynamicGop>);
 
 /// What the header needs besides what the first GOP tells.
 pub struct StreamOptions {
@@ -84,6 +90,11 @@ fn partial(path: &std::path::Path) -> PathBuf {
 /// The header for `gops` GOPs shaped like `first`.
 fn header(o: &StreamOptions, first: &Gop, gops: u32) -> Res<SceneHeader> {
     let (c, dy) = first;
+    let Canon::State(c) = c else {
+        return Err(input(
+            "GOP 0 needs its full canonical state, not a residual field",
+        ));
+    };
     let lw = c.statics.lang_width.max(c.dynamics.lang_width);
     let (lang_levels, lang_dims) = match lw {
         0 => (0, 0),
@@ -165,7 +176,11 @@ impl Writer {
 }
 
 fn push(py: Python<'_>, enc: &mut StreamEncoder<Out>, gop: &Gop) -> Res<()> {
-    py.allow_threads(|| enc.push_gop(&gop.0, gop.1.as_ref()))
+    let canonical = match &gop.0 {
+        Canon::State(c) => GopCanonical::State(c),
+        Canon::Ntc(f) => GopCanonical::Ntc(f),
+    };
+    py.allow_threads(|| enc.push(canonical, gop.1.as_ref()))
         .py_err()
 }
 
@@ -225,17 +240,29 @@ impl Writer {
     }
 
     /// Append the next GOP (see docs/python.md for the arrays).
-    #[pyo3(signature = (static_set, dynamic=None, time_features=None, decoders=None, scale_offsets=None))]
+    #[pyo3(signature = (static_set=None, dynamic=None, time_features=None, decoders=None,
+        scale_offsets=None, residual_field=None))]
     fn write_gop(
         &self,
         py: Python<'_>,
-        static_set: &Bound<'_, PyDict>,
+        static_set: Option<&Bound<'_, PyDict>>,
         dynamic: Option<&Bound<'_, PyDict>>,
         time_features: Option<&Bound<'_, PyAny>>,
         decoders: Option<&Bound<'_, PyDict>>,
         scale_offsets: Option<bool>,
+        residual_field: Option<&Bound<'_, PyDict>>,
     ) -> Res<()> {
-        let canonical = canonical_from_py(static_set, dynamic)?;
+        let canonical = match (static_set, residual_field) {
+            (Some(s), None) => Canon::State(Box::new(canonical_from_py(s, dynamic)?)),
+            (None, Some(f)) if dynamic.is_none() => {
+                Canon::Ntc(Box::new(crate::ntc_dict::ntc_from_dict(f)?))
+            }
+            _ => {
+                return Err(input(
+                    "give the canonical sets (static, dynamic) or a residual_field, not both",
+                ))
+            }
+        };
         let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let index = match &*state {
             State::Open { pending } => pending.len() as u32,
@@ -247,10 +274,12 @@ impl Writer {
             (None, None) => None,
             _ => return Err(input("give time_features and decoders together")),
         };
-        if dynamic_gop.is_some() == canonical.dynamics.is_empty() {
-            return Err(input(
-                "a GOP with dynamic Gaussians needs time_features and decoders (and only then)",
-            ));
+        if let Canon::State(c) = &canonical {
+            if dynamic_gop.is_some() == c.dynamics.is_empty() {
+                return Err(input(
+                    "a GOP with dynamic Gaussians needs time_features and decoders (and only then)",
+                ));
+            }
         }
         let gop = (canonical, dynamic_gop);
         match &mut *state {
