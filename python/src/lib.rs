@@ -13,6 +13,8 @@ mod gop_dict;
 #[cfg(feature = "hevc")]
 mod gop_input;
 mod ntc_dict;
+#[cfg(feature = "hevc")]
+mod ntc_input;
 mod reader;
 mod scenes;
 mod splat_write;

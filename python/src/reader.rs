@@ -247,6 +247,20 @@ impl Reader {
         Ok(d)
     }
 
+    fn __repr__(&self) -> String {
+        let s = &self.scene;
+        format!(
+            "<dlgs.Reader {} GOPs x {} frames at {} fps, {} static + {} dynamic, SH {}, language {}>",
+            s.gop_count,
+            s.gop_length,
+            s.fps(),
+            s.n_static,
+            s.n_dynamic,
+            s.sh_degree,
+            s.lang_width()
+        )
+    }
+
     /// Frames in the stream.
     fn __len__(&self) -> usize {
         self.scene.frame_count as usize

@@ -255,7 +255,7 @@ impl Writer {
         let canonical = match (static_set, residual_field) {
             (Some(s), None) => Canon::State(Box::new(canonical_from_py(s, dynamic)?)),
             (None, Some(f)) if dynamic.is_none() => {
-                Canon::Ntc(Box::new(crate::ntc_dict::ntc_from_dict(f)?))
+                Canon::Ntc(Box::new(crate::ntc_input::ntc_from_dict(f)?))
             }
             _ => {
                 return Err(input(
