@@ -79,20 +79,21 @@ fn from_tuple(t: &Bound<'_, PyTuple>) -> Res<Camera> {
     })
 }
 
-/// Resolve `obj` (dict, tuple, or orbit index placed around `scene()`), then resize to
+/// Resolve `obj` (dict, tuple, or index into `default_orbit()`: [`orbit`] with 8 views at
+/// 1352x1014 around the scene), then resize to
 /// `width` x `height` when given (as `--width/--height` do).
 pub fn resolve(
     obj: &Bound<'_, PyAny>,
     width: Option<u32>,
     height: Option<u32>,
-    scene: impl FnOnce() -> Res<Gaussians>,
+    default_orbit: impl FnOnce() -> Res<Vec<Camera>>,
 ) -> Res<Camera> {
     let cam = if let Ok(d) = obj.downcast::<PyDict>() {
         from_json_entry(d)?
     } else if let Ok(t) = obj.downcast::<PyTuple>() {
         from_tuple(t)?
     } else if let Ok(i) = obj.extract::<usize>() {
-        let cams = orbit(&scene()?, 8, 1352, 1014);
+        let cams = default_orbit()?;
         cams.get(i)
             .cloned()
             .ok_or_else(|| request(format!("orbit view {i}: there are 8 (0..=7)")))?

@@ -36,6 +36,8 @@ pub struct Reader {
     statics: Mutex<Option<(u32, Py<PyDict>)>>,
     /// This reader's own worker threads (`open(..., threads=N)`); `None`: the global pool.
     pool: Option<rayon::ThreadPool>,
+    /// The default orbit of the last GOP a camera index was resolved in.
+    orbit: Mutex<Option<(u32, Vec<Camera>)>>,
     /// The last merged frame's dynamic buffers, decoded into again by the next one.
     reuse: Mutex<Option<Gaussians>>,
 }
@@ -80,6 +82,7 @@ pub fn open_reader(
         version,
         statics: Mutex::new(None),
         reuse: Mutex::new(None),
+        orbit: Mutex::new(None),
         pool: match threads {
             None => None,
             Some(n) => Some(
@@ -117,6 +120,22 @@ impl Reader {
         })
     }
 
+    /// The 8 orbit views `dlgs render` places around the GOP shown at `t` (cached per GOP:
+    /// placing them takes medians over the canonical Gaussians).
+    fn default_orbit(&self, py: Python<'_>, t: f64) -> Res<Vec<Camera>> {
+        let gop = self.scene.locate(t).py_err()?.gop;
+        let mut cache = self.orbit.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((g, cams)) = cache.as_ref() {
+            if *g == gop {
+                return Ok(cams.clone());
+            }
+        }
+        let g = self.canonical(py, t)?;
+        let cams = camera::orbit(&g, 8, 1352, 1014);
+        *cache = Some((gop, cams.clone()));
+        Ok(cams)
+    }
+
     pub fn canonical(&self, py: Python<'_>, t: f64) -> Res<Gaussians> {
         self.detach(py, || {
             let mut d = lock(&self.dec);
@@ -134,7 +153,7 @@ impl Reader {
         width: Option<u32>,
         height: Option<u32>,
     ) -> Res<Camera> {
-        camera::resolve(cam, width, height, || self.canonical(py, t))
+        camera::resolve(cam, width, height, || self.default_orbit(py, t))
     }
 
     /// The Gaussians at `t` (static then dynamic) seen from `centre`.
