@@ -61,6 +61,17 @@ def dyn_exact(data, cli, work) -> Path:
 
 
 @pytest.fixture(scope="session")
+def labelled(data, cli, work) -> Path:
+    """The real fruit scene with SYNTHETIC language from its REAL per-Gaussian labels
+    (`dlgs labels`): scene.ply, lang_decoder.safetensors, negatives.npy, category_N.npy."""
+    out = work / "labelled"
+    ply = data / "ply" / "supersplat_fruit_drops_minimal_4721_sh3.ply"
+    run_cli("labels", ply, "--annotations",
+            data / "ply" / "supersplat_fruit_drops_minimal.annotations.json", "-o", out)
+    return out
+
+
+@pytest.fixture(scope="session")
 def dyn_hevc(dyn_exact, cli, work) -> Path:
     """`dyn_exact` re-encoded by the CLI with HEVC time features (crf 6)."""
     out = work / "dyn_hevc.dlgs"

@@ -8,6 +8,12 @@ import numpy as np
 
 
 def read_png_rgb8(path) -> np.ndarray:
+    """An 8-bit RGB PNG as (H, W, 3) uint8."""
+    return read_png8(path, 3)
+
+
+def read_png8(path, channels: int) -> np.ndarray:
+    """An 8-bit PNG with `channels` (1 gray, 3 RGB) as (H, W, channels) uint8."""
     data = open(path, "rb").read()
     assert data[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG"
     pos, idat, w = 8, b"", None
@@ -16,12 +22,13 @@ def read_png_rgb8(path) -> np.ndarray:
         body = data[pos + 8:pos + 8 + n]
         if kind == b"IHDR":
             w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", body)
-            assert (depth, ctype, interlace) == (8, 2, 0), "only 8-bit RGB, not interlaced"
+            want = {1: 0, 3: 2}[channels]
+            assert (depth, ctype, interlace) == (8, want, 0), "8-bit gray or RGB, not interlaced"
         elif kind == b"IDAT":
             idat += body
         pos += 12 + n
     raw = zlib.decompress(idat)
-    bpp, stride = 3, w * 3
+    bpp, stride = channels, w * channels
     out = np.zeros((h, stride), np.uint8)
     prev = np.zeros(stride, np.int32)
     for y in range(h):
@@ -47,7 +54,7 @@ def read_png_rgb8(path) -> np.ndarray:
                 cur[x] = (line[x] + p) & 255
         out[y] = cur
         prev = cur
-    return out.reshape(h, w, 3)
+    return out.reshape(h, w, channels)
 
 
 def quantise(rgb: np.ndarray) -> np.ndarray:

@@ -4,16 +4,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from conftest import run_cli
-
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "encode_and_query.py"
 
 
-def test_example_encode_and_query(data, work):
-    labelled = work / "labelled"
-    ply = data / "ply" / "supersplat_fruit_drops_minimal_4721_sh3.ply"
-    run_cli("labels", ply, "--annotations",
-            data / "ply" / "supersplat_fruit_drops_minimal.annotations.json", "-o", labelled)
+def test_example_encode_and_query(labelled, work):
     out = work / "example.dlgs"
     p = subprocess.run([sys.executable, str(EXAMPLE), str(labelled), str(out)],
                        capture_output=True, text=True)
