@@ -124,15 +124,21 @@ impl Reader {
     /// placing them takes medians over the canonical Gaussians).
     fn default_orbit(&self, py: Python<'_>, t: f64) -> Res<Vec<Camera>> {
         let gop = self.scene.locate(t).py_err()?.gop;
-        let mut cache = self.orbit.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((g, cams)) = cache.as_ref() {
+        // Not held while the GIL is released below (a thread waiting for it with the GIL
+        // would keep this one from taking the GIL back).
+        if let Some((g, cams)) = self
+            .orbit
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+        {
             if *g == gop {
                 return Ok(cams.clone());
             }
         }
         let g = self.canonical(py, t)?;
         let cams = camera::orbit(&g, 8, 1352, 1014);
-        *cache = Some((gop, cams.clone()));
+        *self.orbit.lock().unwrap_or_else(|e| e.into_inner()) = Some((gop, cams.clone()));
         Ok(cams)
     }
 
@@ -206,15 +212,24 @@ impl Reader {
             .detach(py, || lock(&self.dec).frame_at(t, &opts))
             .py_err()?;
         let gop = frame.time.gop;
-        let mut cache = self.statics.lock().unwrap_or_else(|e| e.into_inner());
-        let statics = match cache.as_ref() {
-            Some((g, d)) if *g == gop => d.bind(py).clone(),
-            _ => {
+        // The lock is never held while Python runs (another thread could then wait for it
+        // holding the GIL).
+        let cached = {
+            let cache = self.statics.lock().unwrap_or_else(|e| e.into_inner());
+            match cache.as_ref() {
+                Some((g, d)) if *g == gop => Some(d.clone_ref(py)),
+                _ => None,
+            }
+        };
+        let statics = match cached {
+            Some(d) => d.into_bound(py),
+            None => {
                 let d = gaussians_to_dict(py, frame.statics().clone())?;
                 for v in d.values() {
                     v.call_method1("setflags", (false,))?;
                 }
-                *cache = Some((gop, d.clone().unbind()));
+                let keep = d.clone().unbind();
+                *self.statics.lock().unwrap_or_else(|e| e.into_inner()) = Some((gop, keep));
                 d
             }
         };

@@ -167,6 +167,21 @@ impl Writer {
         StreamEncoder::new(BufWriter::new(f), scene, self.cfg.clone()).py_err()
     }
 
+    /// The state, locked: the lock is held across calls that release the GIL (encoding), so a
+    /// thread waits for it without the GIL.
+    fn lock_state(&self, py: Python<'_>) -> std::sync::MutexGuard<'_, State> {
+        loop {
+            match self.state.try_lock() {
+                Ok(g) => return g,
+                Err(std::sync::TryLockError::Poisoned(e)) => return e.into_inner(),
+                // Wait without the GIL until the holder lets go, then try again.
+                Err(std::sync::TryLockError::WouldBlock) => {
+                    py.allow_threads(|| drop(self.state.lock()))
+                }
+            }
+        }
+    }
+
     fn report(&self, py: Python<'_>, done: u32, total: u32) -> Res<()> {
         if let Some(cb) = &self.progress {
             cb.call1(py, (done, total))?;
@@ -263,7 +278,7 @@ impl Writer {
                 ))
             }
         };
-        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let mut state = self.lock_state(py);
         let index = match &*state {
             State::Open { pending } => pending.len() as u32,
             State::Streaming { done, .. } => *done,
@@ -314,7 +329,7 @@ impl Writer {
 
     /// Finish the file (index, tail) and move it to `path`; returns its size in bytes.
     fn close(&self, py: Python<'_>) -> Res<u64> {
-        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let mut state = self.lock_state(py);
         let taken = std::mem::replace(&mut *state, State::Closed);
         drop(state);
         let enc = match taken {
@@ -371,7 +386,7 @@ impl Writer {
         if exc_type.is_none() {
             self.close(py)?;
         } else {
-            *self.state.lock().unwrap_or_else(|e| e.into_inner()) = State::Closed;
+            *self.lock_state(py) = State::Closed;
             let _ = std::fs::remove_file(partial(&self.path));
         }
         Ok(false)

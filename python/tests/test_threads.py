@@ -54,3 +54,28 @@ def test_two_threads_speed_up(dyn_exact):
     if busy > 1.0 and speedup <= 1.3:
         pytest.skip(f"machine busy (load {busy:.1f}): {p.stdout.strip()}")
     assert speedup > 1.3, p.stdout
+
+
+def test_one_reader_shared_by_threads(dyn_exact):
+    """Threads sharing one reader take turns (no deadlock, the same results as one thread)."""
+    r = dlgs.open(dyn_exact)
+    times = [0.05 * i for i in range(24)]
+    want = {t: r.render(t, 1, width=64, height=48) for t in times}
+    got, errors = {}, []
+
+    def work(ts):
+        try:
+            for t in ts:
+                r.frame(t, camera=0, split=True)
+                got[t] = r.render(t, 1, width=64, height=48)
+        except Exception as e:  # surfaced below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work, args=(times[i::3],)) for i in range(3)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(timeout=120)
+    assert not any(th.is_alive() for th in threads) and not errors
+    for t in times:
+        assert (got[t] == want[t]).all()
