@@ -5,3 +5,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cargo test --workspace --release "$@"
+# Python bindings: wheel built with maturin, installed in a fresh venv, pytest (docs/python.md).
+bash scripts/python_test.sh
