@@ -196,7 +196,24 @@ fn read_features(
     n: usize,
     limits: &Limits,
 ) -> Result<(TimeFeatures, FeatureSource), IngestError> {
-    let path = dir.join("_point_feats.mp4");
+    let side = square_side(n, &dir.join("_point_feats.mp4").display().to_string())?;
+    read_feature_video(dir, "_point_feats", rows, n, side, limits)
+}
+
+/// A GOP's time-feature video `{name}.mp4` in `dir` (12-bit HEVC, 7 key pictures of 4 x 4
+/// tiles of `side` x `side`) dequantised with the `{name}` row's min/max of
+/// `compression_info.csv` as the reference does. The 3DGS variant's tiles are exactly `n`
+/// (`_point_feats`); the HAC variant's are `ceil(sqrt(n))` wide, zero-padded
+/// (`_temporal_feat`).
+pub fn read_feature_video(
+    dir: &Path,
+    name: &str,
+    rows: &[Row],
+    n: usize,
+    side: usize,
+    limits: &Limits,
+) -> Result<(TimeFeatures, FeatureSource), IngestError> {
+    let path = dir.join(format!("{name}.mp4"));
     let what = path.display().to_string();
     if !path.is_file() {
         return Err(IngestError::Missing {
@@ -207,22 +224,24 @@ fn read_features(
     if let Ok(m) = std::fs::metadata(&path) {
         limits.check_alloc("reference run file size", m.len(), 0)?;
     }
-    let row = csv::find(rows, "_point_feats")
+    let row = csv::find(rows, name)
         .and_then(|r| r.range)
         .ok_or_else(|| {
             IngestError::format(
                 &format!("{}/compression_info.csv", dir.display()),
-                "no _point_feats min/max",
+                format!("no {name} min/max"),
             )
         })?;
-    let side = square_side(n, &what)?;
+    if side * side < n {
+        return Err(IngestError::shape(&what, format!("{side}^2 tiles for {n} rows")));
+    }
     let track =
         dlgs_video::demux_hevc(&path).map_err(|e| IngestError::format(&what, e.to_string()))?;
     if track.width as usize != 4 * side || track.height as usize != 4 * side {
         return Err(IngestError::shape(
             &what,
             format!(
-                "{}x{} pictures, expected {}x{} for {n} dynamic Gaussians",
+                "{}x{} pictures, expected {}x{} for {n} dynamic rows",
                 track.width,
                 track.height,
                 4 * side,
