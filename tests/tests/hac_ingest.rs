@@ -78,6 +78,7 @@ fn gop0_decodes_to_the_reference_tensors() {
     let t0 = Instant::now();
     let g = gop0();
     println!("GOP 0 decode: {:.3} s", t0.elapsed().as_secs_f64());
+    println!("{:?}", g.report);
     let r = St::load("gop0.safetensors");
     let n = 2400;
     assert_eq!(g.anchors.len(), n);
@@ -205,9 +206,12 @@ fn gop0_symbols_with_the_reference_context() {
                 &mean[a0 * c..a1 * c],
                 &scale[a0 * c..a1 * c],
                 &q[a0..a1],
+                &q[a0..a1],
+                1024,
                 "test",
             )
-            .unwrap();
+            .unwrap()
+            .values;
             let w = &want[a0 * c..a1 * c];
             for (k, (gc, wc)) in got
                 .chunks(bitstream::CHUNK)
@@ -256,8 +260,14 @@ fn gop0_copy() -> tempfile::TempDir {
     tmp
 }
 
+/// No repair search: corrupt chunks fail verification, and the errors come before it.
+const NO_REPAIR: HacLimits = HacLimits {
+    max_anchors: 1 << 24,
+    repair_trials: 0,
+};
+
 fn err_of(dir: &Path) -> IngestError {
-    hac::read_gop(dir, None, HacLimits::default()).unwrap_err()
+    hac::read_gop(dir, None, NO_REPAIR).unwrap_err()
 }
 
 #[test]
@@ -372,7 +382,7 @@ fn malformed_inputs_give_typed_errors_naming_the_file() {
                 c[i] = rng.u8(..);
             }
             std::fs::write(&f, &c).unwrap();
-            let _ = hac::read_gop(t.path(), None, HacLimits::default());
+            let _ = hac::read_gop(t.path(), None, NO_REPAIR);
         }
         std::fs::write(&f, &orig).unwrap();
     }

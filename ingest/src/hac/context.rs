@@ -120,9 +120,20 @@ pub fn two_layer(m: &TwoLayer, x: &[f32], hidden: &mut Vec<f32>, out: &mut [f32]
     dense(&m.second, hidden, out);
 }
 
-/// tanh as used for Q (torch's float32 tanh; measured against the reference's Q).
-pub fn tanh_f32(x: f32) -> f32 {
-    (x as f64).tanh() as f32
+/// tanh for Q: the correctly rounded float32 value and the other float next to the exact
+/// value. torch's CPU float32 tanh is MKL's `vsTanh` (checked: same bits), faithful but not
+/// correctly rounded (1.5 % of random arguments), so the encoder used one of the two.
+pub fn tanh_f32(x: f32) -> (f32, f32) {
+    let t = (x as f64).tanh();
+    let r = t as f32;
+    let other = if (r as f64) < t {
+        r.next_up()
+    } else if (r as f64) > t {
+        r.next_down()
+    } else {
+        r
+    };
+    (r, other)
 }
 
 /// Per-anchor entropy parameters of one attribute.
@@ -133,6 +144,8 @@ pub struct AttrContext {
     pub scale: Vec<f32>,
     /// One per anchor.
     pub q: Vec<f32>,
+    /// Q from the other float next to the exact tanh (equal to `q` where both give one Q).
+    pub q_alt: Vec<f32>,
 }
 
 /// The context of a set of (dequantised) anchors: per attribute mean, scale (σ before the
@@ -170,10 +183,10 @@ pub fn context(
             at += 2 * c;
         }
         for attr in Attr::ALL {
-            let adj = o[at + attr.index()];
-            out[attr.index()]
-                .q
-                .push(Q_BASE[attr.index()] * (1.0 + tanh_f32(adj)));
+            let (t, t_alt) = tanh_f32(o[at + attr.index()]);
+            let base = Q_BASE[attr.index()];
+            out[attr.index()].q.push(base * (1.0 + t));
+            out[attr.index()].q_alt.push(base * (1.0 + t_alt));
         }
     }
     out

@@ -29,26 +29,159 @@ pub fn erfc_f32(z: f32) -> f32 {
 /// Integer CDF entry `j` of a symbol with step `q`, mean `mu`, scale `sigma`, for a file with
 /// minimum `mn` and `lp` entries: `rint(float32(cdf * (65536 - (lp-1)))) + j` (mod 2^16).
 pub fn cdf_entry(mn: i32, j: usize, q: f32, mu: f32, sigma: f32, lp: usize) -> u16 {
+    cdf_entries(mn, j, q, mu, sigma, lp).0
+}
+
+/// [`cdf_entry`] with `erfc(|z|)` rounded to the nearest float, and with it rounded to the
+/// other float next to the exact value (what MKL returns for some arguments).
+pub fn cdf_entries(mn: i32, j: usize, q: f32, mu: f32, sigma: f32, lp: usize) -> (u16, u16) {
     let x = (((mn as f64 + j as f64) - 0.5) * q as f64) as f32;
     let s = sigma.max(1e-9f32);
     let z = -(x - mu) / (s * std::f32::consts::SQRT_2);
-    let cdf = 0.5 * erfc_f32(z);
-    let v = (cdf * (65536.0f32 - (lp as f32 - 1.0))).round_ties_even();
-    ((v as i64 + j as i64) & 0xFFFF) as u16
+    let exact = libm::erfc(z.abs() as f64);
+    let e = exact as f32;
+    let other = if (e as f64) < exact {
+        e.next_up()
+    } else if (e as f64) > exact {
+        e.next_down()
+    } else {
+        e
+    };
+    let scale = 65536.0f32 - (lp as f32 - 1.0);
+    let int = |e: f32| {
+        let v = if z < 0.0 { 2.0 - e } else { e };
+        let v = (0.5 * v * scale).round_ties_even();
+        ((v as i64 + j as i64) & 0xFFFF) as u16
+    };
+    (int(e), int(other))
 }
 
+/// torchac's encoder (precision 16, E1/E2/E3 with pending bits, termination `pending + 1`
+/// bits, zero padding) run over `syms`; true iff it writes exactly `stream`. A decode with
+/// another CDF than the encoder's still re-encodes to the stream's prefix, but (nearly
+/// always) not to its exact end and length: this is the check of a decode.
+pub fn reencodes_to(
+    stream: &[u8],
+    syms: &[u16],
+    lp: usize,
+    mut cdf_at: impl FnMut(usize, usize) -> u16,
+) -> bool {
+    struct W<'a> {
+        stream: &'a [u8],
+        bits: usize,
+        ok: bool,
+    }
+    impl W<'_> {
+        fn put(&mut self, bit: bool) {
+            let byte = self.bits / 8;
+            let want = self
+                .stream
+                .get(byte)
+                .map(|b| b >> (7 - self.bits % 8) & 1 == 1);
+            self.ok &= want == Some(bit);
+            self.bits += 1;
+        }
+        fn put_pending(&mut self, bit: bool, pending: &mut u64) {
+            self.put(bit);
+            while *pending > 0 && self.ok {
+                self.put(!bit);
+                *pending -= 1;
+            }
+            *pending = 0;
+        }
+    }
+    let max_symbol = lp.saturating_sub(2);
+    let mut w = W {
+        stream,
+        bits: 0,
+        ok: true,
+    };
+    let (mut low, mut high, mut pending) = (0u32, u32::MAX, 0u64);
+    for (i, &s) in syms.iter().enumerate() {
+        let s = s as usize;
+        if s > max_symbol {
+            return false;
+        }
+        let span = high as u64 - low as u64 + 1;
+        let c_low = cdf_at(i, s) as u64;
+        let c_high = if s == max_symbol {
+            0x10000
+        } else {
+            cdf_at(i, s + 1) as u64
+        };
+        high = low
+            .wrapping_sub(1)
+            .wrapping_add((span.wrapping_mul(c_high) >> 16) as u32);
+        low = low.wrapping_add((span.wrapping_mul(c_low) >> 16) as u32);
+        loop {
+            if high < 0x8000_0000 {
+                w.put_pending(false, &mut pending);
+            } else if low >= 0x8000_0000 {
+                w.put_pending(true, &mut pending);
+            } else if low >= 0x4000_0000 && high < 0xC000_0000 {
+                pending += 1;
+                low = (low << 1) & 0x7FFF_FFFF;
+                high = (high << 1) | 0x8000_0001;
+                continue;
+            } else {
+                break;
+            }
+            low <<= 1;
+            high = (high << 1) | 1;
+        }
+        if !w.ok {
+            return false;
+        }
+    }
+    pending += 1;
+    w.put_pending(low >= 0x4000_0000, &mut pending);
+    while !w.bits.is_multiple_of(8) && w.ok {
+        w.put(false);
+    }
+    w.ok && w.bits == stream.len() * 8
+}
+
+/// What decoding one Gaussian `.b` file gave.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GaussianDecode {
+    /// `(sym + min) * Q`, anchor-major.
+    pub values: Vec<f32>,
+    /// Chunks whose decode re-encodes to their bytes exactly, of all chunks.
+    pub verified_chunks: usize,
+    pub chunks: usize,
+    /// Anchors whose Q was switched to the other tanh rounding to make a chunk verify.
+    pub q_switched: usize,
+    /// CDF entries switched to the other erfc rounding to make a chunk verify.
+    pub entries_switched: usize,
+}
+
+/// Most Q switches tried per chunk that does not verify.
+const MAX_Q_TRIES: usize = 512;
+/// Most anchors whose Q is switched together with one CDF entry.
+const MAX_PAIR_Q: usize = 4;
+/// Most single CDF-entry switches tried per chunk that does not verify.
+const MAX_ENTRY_TRIES: usize = 512;
+
 /// Decode one Gaussian `.b` file of `anchors` anchors × `channels` symbols, anchor-major,
-/// with per-anchor `q` and per-symbol `mean`, `scale`; returns `(sym + min) * Q`.
+/// with per-anchor `q` (and `q_alt`, the other tanh rounding) and per-symbol `mean`,
+/// `scale`. A chunk whose decode does not re-encode to its bytes is decoded again with one
+/// anchor's Q switched to `q_alt` (in anchor order, up to [`MAX_Q_TRIES`] anchors), keeping
+/// the first that verifies, then one CDF entry on the decode path switched to the other erfc
+/// rounding (with at most one anchor's Q switched); otherwise the first decode is kept (and
+/// counted as unverified). At most `repair_trials` extra decodes per chunk (each costs one
+/// decode and re-encode of the chunk: corrupt input cannot make this unbounded).
 pub fn decode_gaussian(
     bytes: &[u8],
     channels: usize,
     mean: &[f32],
     scale: &[f32],
     q: &[f32],
+    q_alt: &[f32],
+    repair_trials: usize,
     what: &str,
-) -> Result<Vec<f32>, IngestError> {
+) -> Result<GaussianDecode, IngestError> {
     let n = mean.len();
-    if scale.len() != n || q.len().checked_mul(channels) != Some(n) {
+    if scale.len() != n || q.len().checked_mul(channels) != Some(n) || q_alt.len() != q.len() {
         return Err(IngestError::shape(
             what,
             "context does not match the symbols",
@@ -74,18 +207,116 @@ pub fn decode_gaussian(
             },
         });
     }
+    if let Some(i) = (0..q.len()).find(|&i| !(q[i].is_finite() && q_alt[i].is_finite())) {
+        return Err(IngestError::NonFinite {
+            what: format!("{what}: context Q"),
+            index: i,
+            value: q[i],
+        });
+    }
     let (mni, lp) = (mn as i32, (mx - mn) as usize + 2);
-    let mut out = Vec::with_capacity(n);
+    let mut out = GaussianDecode {
+        values: Vec::with_capacity(n),
+        chunks: c.chunks.len(),
+        ..Default::default()
+    };
     for (k, chunk) in c.chunks.iter().enumerate() {
         let base = k * CHUNK;
         let m = CHUNK.min(n - base);
-        let syms = torchac_decode_with(chunk, m, lp, |i, j| {
+        let (a_first, a_end) = (base / channels, (base + m).div_ceil(channels));
+        let q0 = q[a_first..a_end].to_vec();
+        let cdf = |qs: &[f32], i: usize, j: usize| {
             let g = base + i;
-            cdf_entry(mni, j, q[g / channels], mean[g], scale[g], lp)
-        });
+            cdf_entry(mni, j, qs[g / channels - a_first], mean[g], scale[g], lp)
+        };
+        // Decode with `qs` and one CDF entry overridden; the symbols if they re-encode. At
+        // most `repair_trials` decodes after the first.
+        let trials = std::cell::Cell::new(0usize);
+        let attempt = |qs: &[f32], ov: Option<(usize, usize, u16)>| {
+            if trials.get() > repair_trials {
+                return None;
+            }
+            trials.set(trials.get() + 1);
+            let at = |i: usize, j: usize| match ov {
+                Some((ci, cj, cv)) if (i, j) == (ci, cj) => cv,
+                _ => cdf(qs, i, j),
+            };
+            let syms = torchac_decode_with(chunk, m, lp, at);
+            reencodes_to(chunk, &syms, lp, at).then_some(syms)
+        };
+        // On the decode path of `qs`: the entries whose other erfc rounding gives another
+        // integer, and the anchors whose other Q changes an entry read.
+        let path_candidates = |qs: &[f32]| {
+            let (mut entries, mut anchors) = (Vec::new(), Vec::new());
+            torchac_decode_with(chunk, m, lp, |i, j| {
+                let g = base + i;
+                let a = g / channels;
+                let (v, other) = cdf_entries(mni, j, qs[a - a_first], mean[g], scale[g], lp);
+                if v != other && entries.len() < MAX_ENTRY_TRIES {
+                    entries.push((i, j, other));
+                }
+                if q_alt[a] != q[a]
+                    && anchors.last() != Some(&a)
+                    && cdf_entry(mni, j, q_alt[a], mean[g], scale[g], lp) != v
+                {
+                    anchors.push(a);
+                }
+                v
+            });
+            entries.dedup();
+            anchors.dedup();
+            anchors.truncate(MAX_PAIR_Q);
+            (entries, anchors)
+        };
+        let with_q = |a: Option<usize>| {
+            let mut qs = q0.clone();
+            if let Some(a) = a {
+                qs[a - a_first] = q_alt[a];
+            }
+            qs
+        };
+        let mut found = attempt(&q0, None).map(|s| (q0.clone(), s));
+        if found.is_none() {
+            // One anchor's Q switched (every anchor of the chunk whose Q is ambiguous).
+            let ambiguous = (a_first..a_end).filter(|&a| q_alt[a] != q[a]);
+            for a in ambiguous.take(MAX_Q_TRIES) {
+                let qs = with_q(Some(a));
+                if let Some(s) = attempt(&qs, None) {
+                    found = Some((qs, s));
+                    out.q_switched += 1;
+                    break;
+                }
+            }
+        }
+        if found.is_none() && trials.get() <= repair_trials {
+            // One CDF entry on the decode path switched, with the Q of at most one anchor
+            // whose Q changes an entry on that path switched too.
+            let (_, anchors) = path_candidates(&q0);
+            'pairs: for a in std::iter::once(None).chain(anchors.iter().map(|&a| Some(a))) {
+                let qs = with_q(a);
+                for e in path_candidates(&qs).0 {
+                    if let Some(s) = attempt(&qs, Some(e)) {
+                        found = Some((qs, s));
+                        out.q_switched += a.is_some() as usize;
+                        out.entries_switched += 1;
+                        break 'pairs;
+                    }
+                }
+            }
+        }
+        let verified = found.is_some();
+        let (qs, syms) = match found {
+            Some(f) => f,
+            None => {
+                let s = torchac_decode_with(chunk, m, lp, |i, j| cdf(&q0, i, j));
+                (q0, s)
+            }
+        };
+        out.verified_chunks += verified as usize;
         for (i, s) in syms.into_iter().enumerate() {
             let g = base + i;
-            out.push((s as f32 + mn) * q[g / channels]);
+            out.values
+                .push((s as f32 + mn) * qs[g / channels - a_first]);
         }
     }
     Ok(out)

@@ -31,12 +31,16 @@ use npy::PatchedInfos;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct HacLimits {
     pub max_anchors: usize,
+    /// Extra decodes per chunk that does not re-encode to its bytes, trying the other
+    /// roundings of torch's tanh/erfc (see [`gaussian::decode_gaussian`]); 0 = none.
+    pub repair_trials: usize,
 }
 
 impl Default for HacLimits {
     fn default() -> Self {
         HacLimits {
             max_anchors: 1 << 24,
+            repair_trials: 1024,
         }
     }
 }
@@ -50,6 +54,18 @@ pub struct NtcResidual {
     pub d_feat: Vec<f32>,
     /// `N_OFFSETS * 3` per anchor.
     pub d_offsets: Vec<f32>,
+}
+
+/// The entropy decode's own check: each chunk's symbols re-encoded with the CDFs used must
+/// give the chunk's bytes. A chunk that does not is decoded with CDFs that differ from the
+/// encoder's (float32 `erfc`/`tanh` rounded otherwise than torch's MKL), so its values from
+/// the first differing symbol on are wrong.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DecodeReport {
+    pub chunks: usize,
+    pub verified_chunks: usize,
+    /// Anchors whose Q took the other tanh rounding to verify a chunk.
+    pub q_switched: usize,
 }
 
 /// One decoded GOP.
@@ -67,6 +83,8 @@ pub struct HacGop {
     pub hash_bits: Vec<bool>,
     /// The context model's outputs per attribute (feat, scaling, offsets) (GOP 0).
     pub context: Option<[AttrContext; 3]>,
+    /// How the Gaussian-coded files decoded (GOP 0).
+    pub report: DecodeReport,
     pub mlps: HacMlps,
     pub ntc: Option<NtcResidual>,
 }
@@ -102,6 +120,7 @@ pub fn context_all(
             o.mean.extend(q.mean);
             o.scale.extend(q.scale);
             o.q.extend(q.q);
+            o.q_alt.extend(q.q_alt);
         }
     }
     out
@@ -186,7 +205,7 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
     let jobs: Vec<(usize, Attr)> = (0..batches)
         .flat_map(|s| Attr::ALL.into_iter().map(move |a| (s, a)))
         .collect();
-    let decoded: Vec<Vec<f32>> = jobs
+    let decoded: Vec<gaussian::GaussianDecode> = jobs
         .par_iter()
         .map(|&(s, attr)| {
             let a0 = s * infos.batch;
@@ -201,6 +220,8 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
                 &ac.mean[a0 * c..a1 * c],
                 &ac.scale[a0 * c..a1 * c],
                 &ac.q[a0..a1],
+                &ac.q_alt[a0..a1],
+                limits.repair_trials,
                 &path.display().to_string(),
             )
         })
@@ -209,7 +230,12 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
         positions,
         ..Default::default()
     };
-    for (&(_, attr), v) in jobs.iter().zip(decoded) {
+    let mut report = DecodeReport::default();
+    for (&(_, attr), d) in jobs.iter().zip(decoded) {
+        report.chunks += d.chunks;
+        report.verified_chunks += d.verified_chunks;
+        report.q_switched += d.q_switched;
+        let v = d.values;
         match attr {
             Attr::Feat => anchors.features.extend(v),
             Attr::Scaling => anchors.log_scalings.extend(v),
@@ -227,6 +253,7 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
         bound_max: bmax,
         hash_bits,
         context: Some(ctx),
+        report,
         mlps,
         ntc: None,
     })
@@ -276,6 +303,7 @@ fn read_ntc(bs: &Path, prev: &HacGop, mlps: HacMlps) -> Result<HacGop, IngestErr
         bound_max: prev.bound_max,
         hash_bits: Vec::new(),
         context: None,
+        report: DecodeReport::default(),
         mlps,
         ntc: Some(NtcResidual {
             plane_bits,
