@@ -69,6 +69,19 @@ fn compare(name: &str, ours: &[f32], reference: &[f32]) -> (usize, f32) {
     (differing, max)
 }
 
+/// GOP 0 without the repair search: decode time of the entropy decode itself.
+#[test]
+fn gop0_decode_time_without_repair() {
+    let t0 = Instant::now();
+    let g = hac::read_gop(&gop_dir(0), None, NO_REPAIR).unwrap();
+    println!(
+        "GOP 0 decode without repair: {:.3} s, {:?}",
+        t0.elapsed().as_secs_f64(),
+        g.report
+    );
+    assert!(g.report.verified_chunks >= 14, "{:?}", g.report);
+}
+
 fn gop0() -> HacGop {
     hac::read_gop(&gop_dir(0), None, HacLimits::default()).unwrap()
 }

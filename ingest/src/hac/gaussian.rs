@@ -6,6 +6,7 @@ use crate::latents::torchac_decode_with;
 use crate::IngestError;
 
 use super::bitstream::{parse, CHUNK};
+use super::repair::Chunk;
 
 /// Largest symbol alphabet accepted (the symbols are int16).
 const MAX_LP: usize = 1 << 16;
@@ -149,18 +150,13 @@ pub struct GaussianDecode {
     /// Chunks whose decode re-encodes to their bytes exactly, of all chunks.
     pub verified_chunks: usize,
     pub chunks: usize,
+    /// Indices of the chunks that did not verify.
+    pub unverified: Vec<usize>,
     /// Anchors whose Q was switched to the other tanh rounding to make a chunk verify.
     pub q_switched: usize,
     /// CDF entries switched to the other erfc rounding to make a chunk verify.
     pub entries_switched: usize,
 }
-
-/// Most Q switches tried per chunk that does not verify.
-const MAX_Q_TRIES: usize = 512;
-/// Most anchors whose Q is switched together with one CDF entry.
-const MAX_PAIR_Q: usize = 4;
-/// Most single CDF-entry switches tried per chunk that does not verify.
-const MAX_ENTRY_TRIES: usize = 512;
 
 /// Decode one Gaussian `.b` file of `anchors` anchors × `channels` symbols, anchor-major,
 /// with per-anchor `q` (and `q_alt`, the other tanh rounding) and per-symbol `mean`,
@@ -225,94 +221,43 @@ pub fn decode_gaussian(
         let m = CHUNK.min(n - base);
         let (a_first, a_end) = (base / channels, (base + m).div_ceil(channels));
         let q0 = q[a_first..a_end].to_vec();
-        let cdf = |qs: &[f32], i: usize, j: usize| {
+        let first = torchac_decode_with(chunk, m, lp, |i, j| {
             let g = base + i;
-            cdf_entry(mni, j, qs[g / channels - a_first], mean[g], scale[g], lp)
-        };
-        // Decode with `qs` and one CDF entry overridden; the symbols if they re-encode. At
-        // most `repair_trials` decodes after the first.
-        let trials = std::cell::Cell::new(0usize);
-        let attempt = |qs: &[f32], ov: Option<(usize, usize, u16)>| {
-            if trials.get() > repair_trials {
-                return None;
+            cdf_entry(mni, j, q0[g / channels - a_first], mean[g], scale[g], lp)
+        });
+        let ok = reencodes_to(chunk, &first, lp, |i, j| {
+            let g = base + i;
+            cdf_entry(mni, j, q0[g / channels - a_first], mean[g], scale[g], lp)
+        });
+        let found = if ok || repair_trials == 0 {
+            ok.then(|| (q0.clone(), first.clone()))
+        } else {
+            let problem = Chunk {
+                stream: chunk,
+                m,
+                base,
+                lp,
+                mn: mni,
+                channels,
+                mean,
+                scale,
+                q,
+                q_alt,
+                table: None,
             }
-            trials.set(trials.get() + 1);
-            let at = |i: usize, j: usize| match ov {
-                Some((ci, cj, cv)) if (i, j) == (ci, cj) => cv,
-                _ => cdf(qs, i, j),
-            };
-            let syms = torchac_decode_with(chunk, m, lp, at);
-            reencodes_to(chunk, &syms, lp, at).then_some(syms)
+            .tabulate();
+            problem.search(repair_trials).map(|f| {
+                out.q_switched += f.q_switched;
+                out.entries_switched += f.entries_switched;
+                (f.q, f.syms)
+            })
         };
-        // On the decode path of `qs`: the entries whose other erfc rounding gives another
-        // integer, and the anchors whose other Q changes an entry read.
-        let path_candidates = |qs: &[f32]| {
-            let (mut entries, mut anchors) = (Vec::new(), Vec::new());
-            torchac_decode_with(chunk, m, lp, |i, j| {
-                let g = base + i;
-                let a = g / channels;
-                let (v, other) = cdf_entries(mni, j, qs[a - a_first], mean[g], scale[g], lp);
-                if v != other && entries.len() < MAX_ENTRY_TRIES {
-                    entries.push((i, j, other));
-                }
-                if q_alt[a] != q[a]
-                    && anchors.last() != Some(&a)
-                    && cdf_entry(mni, j, q_alt[a], mean[g], scale[g], lp) != v
-                {
-                    anchors.push(a);
-                }
-                v
-            });
-            entries.dedup();
-            anchors.dedup();
-            anchors.truncate(MAX_PAIR_Q);
-            (entries, anchors)
-        };
-        let with_q = |a: Option<usize>| {
-            let mut qs = q0.clone();
-            if let Some(a) = a {
-                qs[a - a_first] = q_alt[a];
-            }
-            qs
-        };
-        let mut found = attempt(&q0, None).map(|s| (q0.clone(), s));
-        if found.is_none() {
-            // One anchor's Q switched (every anchor of the chunk whose Q is ambiguous).
-            let ambiguous = (a_first..a_end).filter(|&a| q_alt[a] != q[a]);
-            for a in ambiguous.take(MAX_Q_TRIES) {
-                let qs = with_q(Some(a));
-                if let Some(s) = attempt(&qs, None) {
-                    found = Some((qs, s));
-                    out.q_switched += 1;
-                    break;
-                }
-            }
-        }
-        if found.is_none() && trials.get() <= repair_trials {
-            // One CDF entry on the decode path switched, with the Q of at most one anchor
-            // whose Q changes an entry on that path switched too.
-            let (_, anchors) = path_candidates(&q0);
-            'pairs: for a in std::iter::once(None).chain(anchors.iter().map(|&a| Some(a))) {
-                let qs = with_q(a);
-                for e in path_candidates(&qs).0 {
-                    if let Some(s) = attempt(&qs, Some(e)) {
-                        found = Some((qs, s));
-                        out.q_switched += a.is_some() as usize;
-                        out.entries_switched += 1;
-                        break 'pairs;
-                    }
-                }
-            }
-        }
         let verified = found.is_some();
-        let (qs, syms) = match found {
-            Some(f) => f,
-            None => {
-                let s = torchac_decode_with(chunk, m, lp, |i, j| cdf(&q0, i, j));
-                (q0, s)
-            }
-        };
+        let (qs, syms) = found.unwrap_or((q0, first));
         out.verified_chunks += verified as usize;
+        if !verified {
+            out.unverified.push(k);
+        }
         for (i, s) in syms.into_iter().enumerate() {
             let g = base + i;
             out.values

@@ -15,6 +15,7 @@ pub mod gaussian;
 pub mod grid;
 pub mod npy;
 pub mod ntc;
+mod repair;
 
 use std::path::Path;
 
@@ -40,7 +41,7 @@ impl Default for HacLimits {
     fn default() -> Self {
         HacLimits {
             max_anchors: 1 << 24,
-            repair_trials: 1024,
+            repair_trials: 4096,
         }
     }
 }
@@ -60,10 +61,12 @@ pub struct NtcResidual {
 /// give the chunk's bytes. A chunk that does not is decoded with CDFs that differ from the
 /// encoder's (float32 `erfc`/`tanh` rounded otherwise than torch's MKL), so its values from
 /// the first differing symbol on are wrong.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct DecodeReport {
     pub chunks: usize,
     pub verified_chunks: usize,
+    /// `(file name, chunk index)` of each chunk that did not verify.
+    pub unverified: Vec<(String, usize)>,
     /// Anchors whose Q took the other tanh rounding to verify a chunk.
     pub q_switched: usize,
 }
@@ -231,8 +234,12 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
         ..Default::default()
     };
     let mut report = DecodeReport::default();
-    for (&(_, attr), d) in jobs.iter().zip(decoded) {
+    for (&(s, attr), d) in jobs.iter().zip(decoded) {
         report.chunks += d.chunks;
+        let file = format!("{}_{s}_0.b", attr.name());
+        report
+            .unverified
+            .extend(d.unverified.iter().map(|&k| (file.clone(), k)));
         report.verified_chunks += d.verified_chunks;
         report.q_switched += d.q_switched;
         let v = d.values;
