@@ -26,6 +26,8 @@ pub struct HacMlps {
     pub language: Option<TwoLayer>,
     /// The context model's `mlp_grid` (GOP 0 only).
     pub grid: Option<TwoLayer>,
+    /// The NTC's `ntc_mlp` (48 -> 100 -> 80; GOPs with an NTC residual).
+    pub ntc: Option<TwoLayer>,
 }
 
 impl HacMlps {
@@ -131,6 +133,7 @@ pub fn read_hac_mlps(path: &Path) -> Result<HacMlps, IngestError> {
         cov: two_layer(&t, "mlp_cov", id, &what)?,
         language: two_layer(&t, "mlp_language", id, &what)?,
         grid: two_layer(&t, "mlp_grid", id, &what)?,
+        ntc: two_layer(&t, "ntc_mlp", id, &what)?,
     };
     for m in [&out.opacity, &out.color, &out.cov, &out.language]
         .into_iter()

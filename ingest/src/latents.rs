@@ -45,7 +45,20 @@ pub fn integer_cdf(cdf: &[f32]) -> Vec<u16> {
 /// Decode `n` symbols of torchac's range coder (precision 16) with one CDF for all.
 /// Reads zero bits past the end of `stream`, as torchac does; never panics.
 pub fn torchac_decode(cdf: &[u16], stream: &[u8], n: usize) -> Vec<u16> {
-    let lp = cdf.len();
+    if cdf.is_empty() {
+        return vec![0; n];
+    }
+    torchac_decode_with(stream, n, cdf.len(), |_, s| cdf[s])
+}
+
+/// [`torchac_decode`] with a CDF per symbol: `cdf(i, s)` is entry `s < lp` of symbol `i`'s
+/// integer CDF (only the entries the decoder reads are asked for). `lp >= 1`.
+pub fn torchac_decode_with(
+    stream: &[u8],
+    n: usize,
+    lp: usize,
+    mut cdf_at: impl FnMut(usize, usize) -> u16,
+) -> Vec<u16> {
     let max_symbol = lp.saturating_sub(2);
     let mut bits = BitReader {
         data: stream,
@@ -73,7 +86,7 @@ pub fn torchac_decode(cdf: &[u16], stream: &[u8], n: usize) -> Vec<u16> {
                 break left;
             }
             let m = (left + right) / 2;
-            let v = cdf[m];
+            let v = cdf_at(i, m);
             if v < count {
                 left = m;
             } else if v > count {
@@ -86,11 +99,11 @@ pub fn torchac_decode(cdf: &[u16], stream: &[u8], n: usize) -> Vec<u16> {
         if i + 1 == n {
             break;
         }
-        let c_low = cdf[sym] as u64;
+        let c_low = cdf_at(i, sym) as u64;
         let c_high = if sym == max_symbol {
             0x10000
         } else {
-            cdf[sym + 1] as u64
+            cdf_at(i, sym + 1) as u64
         };
         high = low
             .wrapping_sub(1)
@@ -133,7 +146,7 @@ impl BitReader<'_> {
 }
 
 /// A NumPy array rebuilt by `numpy.core.multiarray._reconstruct` + `BUILD`: (dtype, shape, bytes).
-fn numpy_array(p: &Pickle, id: Id) -> Result<(String, Vec<usize>, Vec<u8>), String> {
+pub(crate) fn numpy_array(p: &Pickle, id: Id) -> Result<(String, Vec<usize>, Vec<u8>), String> {
     let Obj::Call {
         callable, state, ..
     } = p.get(id)

@@ -9,6 +9,7 @@
 pub mod checkpoint;
 pub mod convert;
 pub mod csv;
+pub mod hac;
 pub mod hac_mlps;
 pub mod jxl;
 pub mod latents;
