@@ -4,6 +4,7 @@ mod cameras_arg;
 mod codec_args;
 mod encode_cmd;
 mod export_cmd;
+mod hac_ingest_cmd;
 mod info;
 mod ingest_cmd;
 mod pending_file;
@@ -252,6 +253,8 @@ fn main() -> Result<()> {
                     residual_mode.as_deref(),
                     &sequence,
                 )
+            } else if let Some(dirs) = hac_ingest_cmd::hac_gops(&input) {
+                hac_ingest_cmd::run_hac_ingest(&dirs, &output, fps, codec.exact_features)
             } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)
             } else if let [one] = input.as_slice() {

@@ -224,16 +224,17 @@ pub fn read_feature_video(
     if let Ok(m) = std::fs::metadata(&path) {
         limits.check_alloc("reference run file size", m.len(), 0)?;
     }
-    let row = csv::find(rows, name)
-        .and_then(|r| r.range)
-        .ok_or_else(|| {
-            IngestError::format(
-                &format!("{}/compression_info.csv", dir.display()),
-                format!("no {name} min/max"),
-            )
-        })?;
+    let row = csv::find(rows, name).and_then(|r| r.range).ok_or_else(|| {
+        IngestError::format(
+            &format!("{}/compression_info.csv", dir.display()),
+            format!("no {name} min/max"),
+        )
+    })?;
     if side * side < n {
-        return Err(IngestError::shape(&what, format!("{side}^2 tiles for {n} rows")));
+        return Err(IngestError::shape(
+            &what,
+            format!("{side}^2 tiles for {n} rows"),
+        ));
     }
     let track =
         dlgs_video::demux_hevc(&path).map_err(|e| IngestError::format(&what, e.to_string()))?;
