@@ -447,10 +447,19 @@ fn culled_anchors_render_the_same_image() {
         [a[0] + p[0] / n, a[1] + p[1] / n, a[2] + p[2] / n]
     });
     let mut checked = 0;
-    for (i, cam) in cameras().into_iter().enumerate() {
-        // Half-way from the fixture camera to the scene centre: part of the scene is outside.
-        let eye = glam::Vec3::from_array(cam).lerp(glam::Vec3::from_array(centre), 0.6);
-        let target = glam::Vec3::from_array(centre) + glam::Vec3::new(0.3, 0.0, 0.0);
+    // From each fixture camera at 3 distances towards the scene centre, looking past it:
+    // parts of the scene fall outside the view, some of it close to the camera.
+    let views: Vec<(glam::Vec3, glam::Vec3)> = cameras()
+        .into_iter()
+        .flat_map(|cam| {
+            [0.3f32, 0.6, 0.8].map(|k| {
+                let c = glam::Vec3::from_array(centre);
+                let eye = glam::Vec3::from_array(cam).lerp(c, k);
+                (eye, c + (c - eye).cross(glam::Vec3::Y).normalize() * 0.3)
+            })
+        })
+        .collect();
+    for (i, (eye, target)) in views.into_iter().enumerate() {
         let camera = Camera::look_at(eye, target, glam::Vec3::new(0.0, -1.0, 0.0), 320, 240, 60.0);
         let in_view = |p: &[[f32; 3]], r: &[f32]| dlgs_render::cull::spheres_in_view(&camera, p, r);
         let (culled, kept) = dec

@@ -9,14 +9,20 @@ use dlgs::model::scaffold::{Activation, Dense, TwoLayer};
 
 use crate::panel::tanh_f32;
 
+/// Every output's own chain of fused multiply-adds in increasing input order, the outputs'
+/// chains interleaved (inputs outer, outputs inner) so that they run side by side instead of
+/// one after another: the same operations, so the same bits.
 #[inline]
 fn dense(d: &Dense, x: &[f32], out: &mut [f32]) {
-    for (o, y) in out.iter_mut().enumerate().take(d.outputs) {
-        let mut acc = d.bias.as_ref().map_or(0.0, |b| b[o]);
-        for (w, xi) in d.weights[o * d.inputs..(o + 1) * d.inputs].iter().zip(x) {
-            acc = w.mul_add(*xi, acc);
+    let out = &mut out[..d.outputs];
+    match &d.bias {
+        Some(b) => out.copy_from_slice(&b[..d.outputs]),
+        None => out.fill(0.0),
+    }
+    for (i, &xi) in x.iter().enumerate().take(d.inputs) {
+        for (o, acc) in out.iter_mut().enumerate() {
+            *acc = d.weights[o * d.inputs + i].mul_add(xi, *acc);
         }
-        *y = acc;
     }
 }
 

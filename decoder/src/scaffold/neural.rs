@@ -175,6 +175,9 @@ pub fn neural_gaussians(
     all
 }
 
+/// Standard deviations of a child's reach (above `sqrt(2 ln 255)`, the 1/255 cut-off).
+pub const REACH_SIGMAS: f32 = 3.5;
+
 /// The SH degree-0 constant: colour = 0.5 + C0 × DC.
 const SH_C0: f32 = 0.282_094_8;
 
@@ -214,9 +217,11 @@ impl NeuralGaussians {
 }
 
 /// How far any child of each anchor can reach from the anchor's position: the longest scaled
-/// offset plus 3 of the largest child scale (`exp(s[3..6])` bounds every child's scale, the
-/// logistic factor being below 1). Children never reach outside, so culling anchors by these
-/// spheres (against a view frustum) never drops a child the view shows.
+/// offset plus [`REACH_SIGMAS`] of the largest child scale (`exp(s[3..6])` bounds every
+/// child's scale, the logistic factor being below 1). A renderer draws a splat out to where its
+/// opacity times the Gaussian falls to 1/255: at most `sqrt(2 ln 255) = 3.33` standard
+/// deviations, so culling anchors by these spheres against a view frustum (widened by the
+/// renderer's dilation) drops no child the view shows.
 pub fn anchor_reach(anchors: &Anchors) -> Vec<f32> {
     (0..anchors.len())
         .map(|a| {
@@ -234,7 +239,7 @@ pub fn anchor_reach(anchors: &Anchors) -> Vec<f32> {
                         .sqrt()
                 })
                 .fold(0.0f32, f32::max);
-            far + 3.0 * e[3].max(e[4]).max(e[5])
+            far + REACH_SIGMAS * e[3].max(e[4]).max(e[5])
         })
         .collect()
 }
