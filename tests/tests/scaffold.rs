@@ -583,7 +583,7 @@ fn a_tiny_scaffold_file_decodes() {
         let bytes = tiny_file();
         let mut file = vec![3u8];
         file.extend_from_slice(&bytes);
-        std::fs::write(dir.join("tiny_file"), file).unwrap();
+        std::fs::write(dir.join("seed-tiny_file"), file).unwrap();
         // Each chunk's payload behind its selector.
         let r = dlgs::container::FileReader::open(std::io::Cursor::new(bytes.clone())).unwrap();
         let mut r = r;
@@ -596,7 +596,7 @@ fn a_tiny_scaffold_file_decodes() {
             };
             let mut seed = vec![sel];
             seed.extend_from_slice(&r.payload(&c).unwrap());
-            std::fs::write(dir.join(c.ty.as_str()), seed).unwrap();
+            std::fs::write(dir.join(format!("seed-{}", c.ty.as_str())), seed).unwrap();
         }
     }
 }
