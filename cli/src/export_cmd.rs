@@ -136,6 +136,13 @@ fn export_one(frames: &mut Frames, t: f64, format: &Format, output: &Path) -> Re
     let g = frames.at(t)?;
     write(output, &format.encode(&g)?)?;
     println!("{} Gaussians at t = {t} s -> {}", g.len(), output.display());
+    if let (Source::Scaffold(..), Some((_, eye, _))) = (&frames.src, frames.view) {
+        println!(
+            "  Scaffold-GS: the neural Gaussians generated for a camera at ({:.4}, {:.4}, {:.4}) \
+             (orbit camera 0 of `dlgs render`), every anchor decoded",
+            eye[0], eye[1], eye[2]
+        );
+    }
     Ok(())
 }
 

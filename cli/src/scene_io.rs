@@ -73,7 +73,8 @@ impl Source {
                     .gop(tp.gop)
                     .with_context(|| format!("decoding GOP {} of {name}", tp.gop))?;
                 let (_, a) = gop.anchors_at(tp.key, tp.delta);
-                let mut g = Gaussians::new(0, 0);
+                let lang = if dec.scene().lang_levels > 0 { 9 } else { 0 };
+                let mut g = Gaussians::new(0, lang);
                 for i in 0..a.len() {
                     g.positions.push(a.positions[i]);
                     let s = a.log_scaling(i);
@@ -81,6 +82,10 @@ impl Source {
                     g.rotations.push([1.0, 0.0, 0.0, 0.0]);
                     g.opacity.push(0.0);
                     g.sh.extend_from_slice(&[0.0; 3]);
+                    if lang > 0 {
+                        g.lang_opacity.push(0.0);
+                        g.lang.extend_from_slice(&[0.0; 9]);
+                    }
                 }
                 Ok(g)
             }
