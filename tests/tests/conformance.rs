@@ -182,3 +182,42 @@ fn path_vectors_still_take_their_paths() {
     }
     assert_eq!(checked, 10);
 }
+
+/// The Scaffold-GS vectors: the committed files are what the generator builds; the valid one
+/// decodes to its listed frames bit for bit (the reference decoder) and the invalid ones fail
+/// with the listed error through the Scaffold-GS decoder.
+#[test]
+fn scaffold_vectors_decode_to_their_frames_and_errors() {
+    use dlgs_decoder::scaffold::ScaffoldDecoder;
+    let listed = table("expected-scaffold.txt");
+    let built = vectors::scaffold::all();
+    assert_eq!(listed.len(), built.len());
+    for (row, v) in listed.iter().zip(&built) {
+        assert_eq!(row[0], v.name);
+        let dir = if v.error.is_some() {
+            "invalid"
+        } else {
+            "valid"
+        };
+        let bytes = std::fs::read(root().join(dir).join(format!("{}.dlgs", v.name))).unwrap();
+        assert!(
+            bytes == v.bytes,
+            "{dir}/{}.dlgs is stale: run gen_vectors",
+            v.name
+        );
+        match v.error {
+            None => {
+                let (_, want) = vector_and_values(v.name, "frames");
+                assert_eq!(vectors::scaffold::frames(&bytes), want, "{}", v.name);
+                assert!(want[0] > 0.0, "frames with children");
+            }
+            Some(e) => {
+                let got = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default())
+                    .and_then(|mut d| d.gop(0).map(|_| ()))
+                    .expect_err(v.name);
+                assert_eq!(got.name(), e, "{}: {got}", v.name);
+                assert_eq!(row[1], e);
+            }
+        }
+    }
+}

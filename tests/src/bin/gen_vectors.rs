@@ -83,6 +83,52 @@ language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened
 16 values of each negative, in stored order. f32 little-endian. A decoder conforms if every value is within 1e-6.\n",
         name = dlgs_tests::vectors::LAED_VECTOR,
     ));
+    // Scaffold-GS vectors: their own expectations (frames depend on a camera; no 3DGS digest).
+    let mut scaffold = String::from(
+        "# name expect (valid: frames in valid/NAME.frames.f32; invalid: the error a reader gives)\n",
+    );
+    readme.push_str(
+        "\n## Scaffold-GS (variant 1, since 1.16)\n\n| file | expect | what |\n|---|---|---|\n",
+    );
+    for v in dlgs_tests::vectors::scaffold::all() {
+        let dir = if v.error.is_some() {
+            "invalid"
+        } else {
+            "valid"
+        };
+        std::fs::write(root.join(dir).join(format!("{}.dlgs", v.name)), &v.bytes).unwrap();
+        if v.error.is_none() {
+            let frames: Vec<u8> = dlgs_tests::vectors::scaffold::frames(&v.bytes)
+                .iter()
+                .flat_map(|x| x.to_le_bytes())
+                .collect();
+            std::fs::write(
+                root.join(dir).join(format!("{}.frames.f32", v.name)),
+                frames,
+            )
+            .unwrap();
+        }
+        writeln!(scaffold, "{} {}", v.name, v.error.unwrap_or("valid")).unwrap();
+        writeln!(
+            readme,
+            "| {dir}/{}.dlgs | {} | {} |",
+            v.name,
+            v.error.unwrap_or("valid"),
+            v.about
+        )
+        .unwrap();
+    }
+    std::fs::write(root.join("expected-scaffold.txt"), scaffold).unwrap();
+    readme.push_str(&format!(
+        "\n`valid/{name}.frames.f32` holds what a decoder must produce (format-spec/dlgs.md §6.12) at t = {times:?} s \
+for the camera centre {cam:?}, language decoded: per time, the number of neural Gaussians (as an f32), then for \
+each, in anchor then offset order, position (3), scale (3), unit quaternion w x y z (4), RGB (3), colour opacity (1), \
+language opacity (1), language (9); f32 little-endian. A decoder conforms if the counts are equal and every value \
+is within 2e-4 (absolute); the reference decoder reproduces every value bit for bit on every platform.\n",
+        name = dlgs_tests::vectors::scaffold::VALID,
+        times = dlgs_tests::vectors::scaffold::TIMES,
+        cam = dlgs_tests::vectors::scaffold::CAMERA,
+    ));
     std::fs::write(root.join("README.md"), readme).unwrap();
     println!("wrote {}", root.display());
 }

@@ -11,6 +11,7 @@ use crate::{load, multi_gop_file, with_synthetic_language};
 
 pub mod errors;
 pub mod paths;
+pub mod scaffold;
 
 pub struct Vector {
     pub name: &'static str,

@@ -1,0 +1,190 @@
+//! Conformance vectors of the Scaffold-GS variant (format-spec §6.9-§6.12): a tiny model whose
+//! anchors sit at the 3 real points of the tiny scene (their features, offsets, scalings, MLP
+//! weights and time features are generated from a fixed seed: no trained model exists here),
+//! its frames for listed times and a camera, and damaged copies with the error a reader gives.
+
+use dlgs::chunks::tfea::TfeaBody;
+use dlgs::container::chunk::encode_header;
+use dlgs::model::scaffold::{
+    Activation, AnchorDeformMlps, AnchorDeformation, Anchors, Dense, ScaffoldCanonical,
+    ScaffoldMlps, TwoLayer, FEAT_DIM, N_OFFSETS, SCALING_DIM,
+};
+use dlgs::model::TimeFeatures;
+use dlgs_decoder::scaffold::{ScaffoldDecoder, ViewRequest};
+use dlgs_encoder::scaffold::{scaffold_scene, ScaffoldWriter};
+
+use super::Vector;
+
+pub const VALID: &str = "scaffold-tiny";
+/// Times (s) and camera centre of the listed frames.
+pub const TIMES: [f64; 3] = [0.0, 0.85, 1.95];
+pub const CAMERA: [f32; 3] = [0.4, -0.3, -2.5];
+
+fn model() -> (
+    ScaffoldCanonical,
+    ScaffoldMlps,
+    AnchorDeformation,
+    TimeFeatures,
+) {
+    let pts = crate::load("tiny/metalsplatter_3-points-from-train.ply").positions;
+    let mut rng = fastrand::Rng::with_seed(51);
+    let mut next = |scale: f32| (rng.f32() - 0.5) * scale;
+    let mut layer = |i: usize, h: usize, o: usize, biased: bool, output: Activation| {
+        let mut d = |i: usize, o: usize| Dense {
+            inputs: i,
+            outputs: o,
+            weights: (0..i * o).map(|_| next(2.0 / (i as f32).sqrt())).collect(),
+            bias: biased.then(|| (0..o).map(|_| next(0.5) + 0.1).collect()),
+        };
+        TwoLayer {
+            first: d(i, h),
+            second: d(h, o),
+            output,
+        }
+    };
+    let mlps = ScaffoldMlps {
+        opacity: layer(54, 8, 20, true, Activation::Tanh),
+        color: layer(54, 8, 30, true, Activation::Sigmoid),
+        cov: layer(54, 8, 70, true, Activation::Identity),
+        language: Some(layer(54, 8, 90, true, Activation::Identity)),
+    };
+    let deform = AnchorDeformMlps {
+        position: layer(19, 8, 3, false, Activation::Identity),
+        feature: layer(16, 8, 50, false, Activation::Identity),
+        offsets: layer(16, 8, 30, false, Activation::Identity),
+        scaling: layer(16, 8, 6, false, Activation::Identity),
+    };
+    let mut rng = fastrand::Rng::with_seed(52);
+    let mut set = |ids: &[usize]| Anchors {
+        positions: ids.iter().map(|&i| pts[i]).collect(),
+        features: (0..ids.len() * FEAT_DIM).map(|_| rng.f32() - 0.5).collect(),
+        offsets: (0..ids.len() * 3 * N_OFFSETS)
+            .map(|_| rng.f32() - 0.5)
+            .collect(),
+        log_scalings: (0..ids.len() * SCALING_DIM)
+            .map(|_| rng.f32() - 3.0)
+            .collect(),
+    };
+    let canonical = ScaffoldCanonical {
+        statics: set(&[0, 1]),
+        dynamics: set(&[2]),
+    };
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &pts {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a] - 0.1);
+            hi[a] = hi[a].max(p[a] + 0.1);
+        }
+    }
+    let features = TimeFeatures {
+        n: 1,
+        keys: 7,
+        channels: 16,
+        data: (0..7 * 16).map(|_| rng.f32() - 0.5).collect(),
+    };
+    let deformation = AnchorDeformation {
+        bound_min: lo,
+        bound_max: hi,
+        mlps: deform,
+    };
+    (canonical, mlps, deformation, features)
+}
+
+pub fn valid_bytes() -> Vec<u8> {
+    let (c, m, d, f) = model();
+    let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
+    let mut w = ScaffoldWriter::new(Vec::new(), scene, 19).unwrap();
+    w.push_gop(&c, &m, Some((&d, &TfeaBody::Exact(f)))).unwrap();
+    w.finish().unwrap()
+}
+
+/// The listed frames: per time, every child's position (3), scale (3), rotation (4), colour (3),
+/// colour opacity (1), language opacity (1) and language (9), children in anchor then offset
+/// order; preceded by the child count (as f32) so that a reader can check it first.
+pub fn frames(bytes: &[u8]) -> Vec<f32> {
+    let mut dec =
+        ScaffoldDecoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
+    let mut out = Vec::new();
+    for t in TIMES {
+        let f = dec
+            .frame_at(
+                t,
+                &ViewRequest {
+                    camera_center: CAMERA,
+                    language: true,
+                    visible: None,
+                },
+            )
+            .unwrap();
+        out.push(f.len() as f32);
+        for i in 0..f.len() {
+            out.extend_from_slice(&f.positions[i]);
+            out.extend_from_slice(&f.scales[i]);
+            out.extend_from_slice(&f.rotations[i]);
+            out.extend_from_slice(&f.colors[i]);
+            out.push(f.opacity[i]);
+            out.push(f.lang_opacity[i]);
+            out.extend_from_slice(&f.lang[9 * i..9 * i + 9]);
+        }
+    }
+    out
+}
+
+/// Replace the payload of the first chunk of type `ty` with `f(payload)`, keeping the CRCs
+/// valid, so a reader meets the fault in the payload itself.
+fn patch(bytes: &[u8], ty: &[u8; 4], f: impl Fn(&mut Vec<u8>)) -> Vec<u8> {
+    let mut r = dlgs::container::FileReader::open(std::io::Cursor::new(bytes.to_vec())).unwrap();
+    let c = r
+        .gop_chunks(0)
+        .unwrap()
+        .into_iter()
+        .find(|c| &c.ty.0 == ty)
+        .unwrap();
+    let mut payload = r.payload(&c).unwrap();
+    let len = payload.len();
+    f(&mut payload);
+    assert_eq!(
+        payload.len(),
+        len,
+        "a patch keeps the payload's length (the GOP index)"
+    );
+    let at = c.offset as usize;
+    let end = c.payload_offset() as usize + c.len as usize + 4;
+    let mut out = bytes[..at].to_vec();
+    out.extend_from_slice(&encode_header(c.ty, c.flags, c.gop, payload.len() as u64));
+    out.extend_from_slice(&payload);
+    out.extend_from_slice(&crc32c::crc32c(&payload).to_le_bytes());
+    out.extend_from_slice(&bytes[end..]);
+    out
+}
+
+pub fn all() -> Vec<Vector> {
+    let good = valid_bytes();
+    vec![
+        Vector {
+            name: VALID,
+            bytes: good.clone(),
+            error: None,
+            about: "Scaffold-GS (variant 1, since 1.16): 2 static + 1 dynamic anchors at the tiny scene's 3 real points, generated features, offsets, scalings, view MLPs (hidden 8, language) and deformation MLPs, exact TFEA; its frames in scaffold-tiny.frames.f32",
+        },
+        Vector {
+            name: "x-scaffold-anchor-count",
+            bytes: patch(&good, b"ANCR", |p| p[4] = 3),
+            error: Some("Payload"),
+            about: "scaffold-tiny with ANCR declaring 3 static anchors (HEAD says 2)",
+        },
+        Vector {
+            name: "x-scaffold-language-flag",
+            bytes: patch(&good, b"AMLP", |p| p[0] = 0),
+            error: Some("Payload"),
+            about: "scaffold-tiny with AMLP saying no language MLP in a scene with language",
+        },
+        Vector {
+            name: "x-scaffold-box",
+            bytes: patch(&good, b"ADEF", |p| p[12..16].copy_from_slice(&(-1e30f32).to_le_bytes())),
+            error: Some("Payload"),
+            about: "scaffold-tiny with an ADEF box whose max is below its min on axis 0",
+        },
+    ]
+}
