@@ -482,3 +482,19 @@ fn npy_parsers_reject_garbage() {
     assert!(npy::parse_patched_infos(b"\x93NUMPY\x01\x00\x00\x00", "x.npy").is_err());
     assert!(bitstream::parse(b"\0\0\0\0", true, 10, "x.b").is_err());
 }
+
+/// Same anchors and report on 1 thread as on the default pool.
+#[test]
+fn gop0_decode_is_the_same_on_one_thread() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let one = pool.install(gop0);
+    let many = gop0();
+    assert!(
+        one.anchors == many.anchors,
+        "anchors differ between thread counts"
+    );
+    assert_eq!(one.report, many.report);
+}

@@ -52,7 +52,7 @@ impl Default for HacLimits {
     fn default() -> Self {
         HacLimits {
             max_anchors: 1 << 24,
-            repair_trials: 8192,
+            repair_trials: 2048,
         }
     }
 }
