@@ -79,6 +79,18 @@ fn gop0_decode_time_without_repair() {
         t0.elapsed().as_secs_f64(),
         g.report
     );
+    let r = St::load("gop0.safetensors");
+    compare("feat (no repair)", &g.anchors.features, &r.f32s("feat"));
+    compare(
+        "scaling (no repair)",
+        &g.anchors.log_scalings,
+        &r.f32s("scaling"),
+    );
+    compare(
+        "offsets (no repair)",
+        &g.anchors.offsets,
+        &r.f32s("offsets"),
+    );
     assert!(g.report.verified_chunks >= 14, "{:?}", g.report);
 }
 
@@ -110,27 +122,79 @@ fn gop0_decodes_to_the_reference_tensors() {
     assert_eq!(nh, 1_766_272);
     assert!(g.hash_bits == r.bits("hash_bits_packed", nh), "hash.b bits");
 
+    // The context model: grid lookup and mlp_grid are bit-exact; Q differs by one ulp for a
+    // few anchors (torch's tanh is MKL's vsTanh, ours the correctly rounded one).
     let ctx = g.context.as_ref().unwrap();
+    let mut q_diff = Vec::new();
     for (k, name) in ["feat", "scaling", "offsets"].into_iter().enumerate() {
-        compare(
+        let m = compare(
             &format!("mean_{name}"),
             &ctx[k].mean,
             &r.f32s(&format!("mean_{name}")),
         );
-        compare(
+        let s = compare(
             &format!("scale_{name}"),
             &ctx[k].scale,
             &r.f32s(&format!("scale_{name}")),
         );
-        compare(
+        assert_eq!((m.0, s.0), (0, 0), "{name}: mean/scale bits");
+        q_diff.push(compare(
             &format!("Q_{name}"),
             &ctx[k].q,
             &r.f32s(&format!("Q_{name}")),
-        );
+        ));
     }
-    compare("feat", &g.anchors.features, &r.f32s("feat"));
-    compare("scaling", &g.anchors.log_scalings, &r.f32s("scaling"));
-    compare("offsets", &g.anchors.offsets, &r.f32s("offsets"));
+    assert!(
+        q_diff.iter().all(|&(n, d)| n <= 25 && d <= 6e-8),
+        "{q_diff:?}"
+    );
+
+    // Symbol-level errors (not one-ulp Q differences) per file chunk.
+    let mut symbol_errors = 0;
+    for (name, ours, c) in [
+        ("feat", &g.anchors.features, 50usize),
+        ("scaling", &g.anchors.log_scalings, 6),
+        ("offsets", &g.anchors.offsets, 30),
+    ] {
+        let want = r.f32s(name);
+        for s in 0..3 {
+            let (a0, a1) = (s * 1000 * c, ((s + 1) * 1000).min(n) * c);
+            for (k, (o, w)) in ours[a0..a1]
+                .chunks(bitstream::CHUNK)
+                .zip(want[a0..a1].chunks(bitstream::CHUNK))
+                .enumerate()
+            {
+                let big = o
+                    .iter()
+                    .zip(w)
+                    .filter(|(a, b)| (*a - *b).abs() > 1e-4)
+                    .count();
+                if big > 0 {
+                    println!("{name}_{s}_0.b chunk {k}: {big} values off by more than 1e-4");
+                }
+                symbol_errors += big;
+            }
+        }
+    }
+    let counts = [
+        compare("feat", &g.anchors.features, &r.f32s("feat")),
+        compare("scaling", &g.anchors.log_scalings, &r.f32s("scaling")),
+        compare("offsets", &g.anchors.offsets, &r.f32s("offsets")),
+    ];
+    println!("values off by more than 1e-4 (wrong symbols): {symbol_errors}");
+    assert_eq!(g.report.chunks, 23);
+    // Measured (see `DecodeReport`): every chunk re-encodes to its bytes, 9 of the 23 only
+    // after the repair search, and every symbol equals the reference's. What differs are
+    // one-ulp Q differences that the stream cannot decide (both roundings of torch's MKL tanh
+    // decode to the same symbols; we keep the correctly rounded one).
+    assert!(g.report.unverified.is_empty(), "{:?}", g.report);
+    assert_eq!(g.report.repaired.len(), 9, "{:?}", g.report);
+    assert_eq!(symbol_errors, 0);
+    assert!(
+        counts[0].0 <= 206 && counts[1].0 <= 6 && counts[2].0 <= 644,
+        "{counts:?}"
+    );
+    assert!(counts.iter().all(|c| c.1 <= 1e-6), "{counts:?}");
 }
 
 #[test]
@@ -177,12 +241,12 @@ fn gop1_ntc_residual_matches_the_reference() {
         &off,
         &r.f32s("offsets"),
     );
-    compare(
+    let (_, f2) = compare(
         "feat (our GOP 0 + residual)",
         &g1.anchors.features,
         &r.f32s("feat"),
     );
-    compare(
+    let (_, o2) = compare(
         "offsets (our GOP 0 + residual)",
         &g1.anchors.offsets,
         &r.f32s("offsets"),
@@ -190,7 +254,8 @@ fn gop1_ntc_residual_matches_the_reference() {
     // torch's sigmoid (of the NTC gate) uses SLEEF's expf_u10, ours the correctly rounded
     // exp: 52 of the 2,400 gates differ by one ulp, which reaches d_feat/d_offsets as a
     // relative ~1e-7 change. 1e-6 is a few ulps of these magnitudes (|d| < 8).
-    for v in [df, doff, f1, o1] {
+    // (Our GOP 0 adds its own one-ulp Q differences, see the GOP 0 test.)
+    for v in [df, doff, f1, o1, f2, o2] {
         assert!(v <= 1e-6, "{v}");
     }
 }
@@ -416,4 +481,20 @@ fn npy_parsers_reject_garbage() {
     assert!(npy::parse_anchor_npy(b"\x93NUMPY\x01\x00\xff\xff{", "x.npy").is_err());
     assert!(npy::parse_patched_infos(b"\x93NUMPY\x01\x00\x00\x00", "x.npy").is_err());
     assert!(bitstream::parse(b"\0\0\0\0", true, 10, "x.b").is_err());
+}
+
+/// Same anchors and report on 1 thread as on the default pool.
+#[test]
+fn gop0_decode_is_the_same_on_one_thread() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let one = pool.install(gop0);
+    let many = gop0();
+    assert!(
+        one.anchors == many.anchors,
+        "anchors differ between thread counts"
+    );
+    assert_eq!(one.report, many.report);
 }
