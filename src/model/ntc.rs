@@ -45,10 +45,11 @@ pub fn groups_in(mask: u8) -> impl Iterator<Item = AttrGroup> {
         .filter(move |g| mask & g.bit() != 0)
 }
 
-/// Interpolated feature of a `D`-dimensional binary grid at `u` (in [0,1]^D) (§6.6.3).
-/// `fetch(index)` returns the ±1 values of the entry's features through `acc`.
+/// The kept corners of a `D`-dimensional grid lookup at `u` (in [0,1]^D) (§6.6.4 steps 1-2):
+/// `add(entry, weight)` for each, in corner order; returns the weights' sum plus `WEIGHT_EPS`
+/// (step 3's divisor). Public for encoders that fit a field with the decoder's own lookup.
 #[inline]
-fn lookup<const D: usize>(
+pub fn lookup<const D: usize>(
     u: [f32; D],
     resolution: u32,
     table: usize,

@@ -19,7 +19,7 @@
 use bitvec::prelude::*;
 use rayon::prelude::*;
 
-use dlgs::model::ntc::{groups_in, NtcConfig, NtcField, NtcMlp, PLANES, WEIGHT_EPS};
+use dlgs::model::ntc::{groups_in, lookup, NtcConfig, NtcField, NtcMlp, PLANES};
 use dlgs::model::residual::SET_DYNAMIC;
 use dlgs::model::Gaussians;
 
@@ -68,32 +68,17 @@ struct Lookups {
     corners: Vec<[(u32, f32); 4]>,
 }
 
-/// The kept corners of a 2D dense lookup at `u` (§6.6.4's rule; weights renormalised).
-fn corners_2d(u: [f32; 2], r: u32) -> [(u32, f32); 4] {
-    let mut g = [0u32; 2];
-    let mut w = [0f32; 2];
-    for d in 0..2 {
-        let pos = u[d] * (r - 2) as f32 + 0.5;
-        g[d] = pos as u32;
-        w[d] = pos - g[d] as f32;
-    }
+/// The kept corners of a 2D lookup at `u` with weights divided by their sum, as the decoder
+/// looks the grid up ([`lookup`], §6.6.4).
+fn corners_2d(u: [f32; 2], r: u32, table: usize) -> [(u32, f32); 4] {
     let mut out = [(0u32, 0f32); 4];
-    let mut sum = 0f32;
-    for (c, slot) in out.iter_mut().enumerate() {
-        let k = [
-            (g[0] + (c & 1) as u32).min(r - 1),
-            (g[1] + (c >> 1) as u32).min(r - 1),
-        ];
-        if k.iter().any(|&v| v == 0 || v == r - 1) {
-            continue;
-        }
-        let wt = (if c & 1 == 1 { w[0] } else { 1.0 - w[0] })
-            * (if c >> 1 == 1 { w[1] } else { 1.0 - w[1] });
-        *slot = (k[0] + k[1] * r, wt);
-        sum += wt;
-    }
-    for slot in &mut out {
-        slot.1 /= sum + WEIGHT_EPS;
+    let mut n = 0;
+    let sum = lookup::<2>(u, r, table, |e, w| {
+        out[n] = (e as u32, w);
+        n += 1;
+    });
+    for slot in &mut out[..n] {
+        slot.1 /= sum;
     }
     out
 }
@@ -206,7 +191,7 @@ pub fn fit(
                 PLANES.iter().flat_map(move |&(a, b)| {
                     s.resolutions
                         .iter()
-                        .map(move |&r| corners_2d([u[a], u[b]], r))
+                        .map(move |&r| corners_2d([u[a], u[b]], r, table))
                 })
             })
             .collect(),
