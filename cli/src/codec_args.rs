@@ -260,6 +260,17 @@ pub struct CodecArgs {
         default_value = "auto"
     )]
     pub ntc: String,
+    /// Sequential scenes: every K-th GOP carries its full canonical state, like a video
+    /// codec's keyframe interval, so a cold seek walks at most K-1 residual GOPs (0: only GOP
+    /// 0 does). Each refresh costs a canonical GOP's bytes; docs/benchmarks/residuals-seek.md
+    /// has bytes against seek time for several K.
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long,
+        value_name = "K",
+        default_value_t = 0
+    )]
+    pub refresh: u32,
     /// The scene's language autoencoder decoder (safetensors with `decoder.<i>.weight/bias`,
     /// see docs/queries.md), stored in the file (LAED chunk) so that players can answer text
     /// queries. When re-encoding a .dlgs, its decoder is kept unless this is given.
@@ -283,6 +294,18 @@ pub fn parse_residual_mode(s: &str) -> Result<ResidualMode> {
         "parallel" => ResidualMode::Parallel,
         _ => bail!("residual mode `{s}`: expected intra, sequential or parallel"),
     })
+}
+
+/// `--refresh K` on a scene about to be written: only sequential scenes refresh.
+pub fn refresh_interval(k: u32, mode: ResidualMode) -> Result<u32> {
+    match (k, mode) {
+        (0, _) => Ok(0),
+        (1, _) => bail!("--refresh 1 would make every GOP intra: use --residual-mode intra"),
+        (k, ResidualMode::Sequential) => Ok(k),
+        (_, m) => bail!(
+            "--refresh applies to sequential scenes (each GOP a residual of the one before);              this one is {m:?}: give --residual-mode sequential"
+        ),
+    }
 }
 
 /// `CodecArgs` alone, to read its defaults the way clap fills them.

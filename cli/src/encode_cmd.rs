@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
+use dlgs::container::header::ResidualMode;
 use dlgs_decoder::Decoder;
 use dlgs_encoder::{CanonicalCodec, EncoderConfig, GopCanonical, StreamEncoder};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -10,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::pending_file::PendingFile;
 use crate::scene_io::is_dlgs;
 
-use crate::codec_args::parse_residual_mode;
+use crate::codec_args::{parse_residual_mode, refresh_interval};
 pub use crate::codec_args::CodecArgs;
 
 pub(crate) fn meta(input: &Path, extra: serde_json::Value) -> serde_json::Value {
@@ -306,6 +307,9 @@ pub fn encode_file(
     let input_mode = scene.residual_mode;
     if let Some(m) = residual_mode {
         scene.residual_mode = parse_residual_mode(m)?;
+    }
+    if codec.refresh != 0 || scene.residual_mode != ResidualMode::Sequential {
+        scene.refresh_interval = refresh_interval(codec.refresh, scene.residual_mode)?;
     }
     let keep_ntc = match codec.ntc.as_str() {
         "keep" => true,

@@ -150,8 +150,15 @@ pub fn run_info(path: &Path, json: bool, channels: bool) -> Result<()> {
         info.file, info.file_bytes, info.version
     );
     println!(
-        "  variant {:?}, residuals {:?}, deformation {:?}",
-        h.variant, h.residual_mode, h.deform_model
+        "  variant {:?}, residuals {:?}{}, deformation {:?}",
+        h.variant,
+        h.residual_mode,
+        if h.refresh_interval > 0 {
+            format!(" (full canonical state every {} GOPs)", h.refresh_interval)
+        } else {
+            String::new()
+        },
+        h.deform_model
     );
     println!(
         "  {} frames at {}/{} fps ({:.3} s), {} GOPs of {} frames, key every {} frames",

@@ -75,9 +75,13 @@ pub fn run_seek(file: &Path, count: usize, seed: u64, gop_cache: usize) -> Resul
         warm.push(seek(&mut d, t)?);
     }
     let chain = match s.residual_mode {
-        ResidualMode::Intra => "each GOP decodes alone",
-        ResidualMode::Parallel => "a GOP needs GOP 0 + its residual",
-        ResidualMode::Sequential => "a GOP needs every residual before it",
+        ResidualMode::Intra => "each GOP decodes alone".to_owned(),
+        ResidualMode::Parallel => "a GOP needs GOP 0 + its residual".to_owned(),
+        ResidualMode::Sequential if s.refresh_interval > 0 => format!(
+            "a GOP needs the residuals since the last refresh: at most {} steps",
+            s.refresh_interval - 1
+        ),
+        ResidualMode::Sequential => "a GOP needs every residual before it".to_owned(),
     };
     println!("({chain})");
     println!(

@@ -11,7 +11,7 @@ use dlgs_render::{metrics, render, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cameras_arg::CameraArgs;
-use crate::codec_args::{parse_residual_mode, CodecArgs};
+use crate::codec_args::{parse_residual_mode, refresh_interval, CodecArgs};
 use crate::scene_io::Source;
 
 /// Options of per-frame sequences (several splat files, or a folder of them).
@@ -184,10 +184,15 @@ pub fn run_sequence(
             Some(m) => parse_residual_mode(m)?,
             None => SequenceSettings::default().residual_mode,
         },
+        refresh_interval: 0,
         residual_field: (!seq.explicit_residuals).then(|| NtcFitSettings {
             iterations: seq.field_iterations,
             ..NtcFitSettings::default()
         }),
+    };
+    let settings = SequenceSettings {
+        refresh_interval: refresh_interval(codec.refresh, settings.residual_mode)?,
+        ..settings
     };
     if seq.explicit_residuals && settings.residual_mode == ResidualMode::Intra {
         bail!("--explicit-residuals needs a residual mode: sequential or parallel, not intra");
@@ -384,15 +389,15 @@ fn check(
     Ok(())
 }
 
-/// Per GOP after the first: how much of the change from the previous GOP the residual field
+/// Per GOP with a residual field: how much of the change from the previous GOP the residual field
 /// carries (RMS of the position offsets before and after), and the refitted GOP's position fit.
 fn print_fields(w: &sequence::WriteReport) {
-    for (g, (f, r)) in w.fields.iter().zip(&w.refits).enumerate() {
+    for (g, (f, r)) in w.field_gops.iter().zip(w.fields.iter().zip(&w.refits)) {
         let rms = |v: &[f64]| (v[..3].iter().map(|x| x * x).sum::<f64>() / 3.0).sqrt();
         println!(
             "  GOP {}: residual field leaves {:.2e} of the {:.2e} position change (RMS); \
              refitted position RMS {:.2e}",
-            g + 1,
+            g,
             rms(&f.residual_rms),
             rms(&f.target_rms),
             r.position_rms

@@ -8,7 +8,7 @@ use dlgs::container::header::DeformModel;
 use dlgs_encoder::{GopCanonical, StreamEncoder};
 use dlgs_testkit::synth::{synth_dynamic, SynthSpec};
 
-use crate::codec_args::{parse_residual_mode, CodecArgs};
+use crate::codec_args::{parse_residual_mode, refresh_interval, CodecArgs};
 use crate::encode_cmd::{bar, meta, report};
 use crate::pending_file::PendingFile;
 
@@ -79,6 +79,11 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
         },
         seed: a.seed,
         residual_mode: parse_residual_mode(&a.residual_mode)?,
+        refresh_interval: 0,
+    };
+    let spec = SynthSpec {
+        refresh_interval: refresh_interval(a.codec.refresh, spec.residual_mode)?,
+        ..spec
     };
     let model = synth_dynamic(&g, &spec)?;
     let settings =

@@ -131,12 +131,36 @@ impl<W: Write> StreamEncoder<W> {
         let reference = GopHeader::expected(&s, g).reference_gop;
         let tracks_state = s.residual_mode != dlgs::container::header::ResidualMode::Intra;
         let (ty, payload, decoded) = if reference == NO_REFERENCE {
-            let GopCanonical::State(canon) = canonical else {
-                return Err(Error::input(format!(
-                    "GOP {g} has no reference GOP: it needs a full canonical state, not a residual"
-                )));
+            // A refresh GOP of a sequential scene (§4.1 `refresh_interval`) given as a residual
+            // carries the state that residual gives: the previous GOP's decoded state plus it.
+            let applied;
+            let (canon, caller_order) = match canonical {
+                GopCanonical::State(c) => (c, true),
+                GopCanonical::Ntc(f) if g > 0 && tracks_state => {
+                    let prev = self.previous.as_ref().expect("GOP g-1 was encoded");
+                    applied = f.apply(prev)?;
+                    (&applied, false)
+                }
+                GopCanonical::Ntc(_) => {
+                    return Err(Error::input(format!(
+                        "GOP {g} has no reference GOP: it needs a full canonical state, not a residual"
+                    )))
+                }
             };
-            let (ty, payload) = self.canonical_payload(canon, g == 0)?;
+            let (ty, payload, order) = self.canonical_payload(canon, g == 0)?;
+            if tracks_state {
+                // Later explicit residuals target the caller's Gaussians: keep the map from
+                // this GOP's decoded order to the caller's.
+                self.static_order = match (order, caller_order, self.static_order.take()) {
+                    (None, true, _) => None,
+                    (None, false, prev) => prev,
+                    (Some(o), true, _) => Some(o),
+                    (Some(o), false, None) => Some(o),
+                    (Some(o), false, Some(prev)) => {
+                        Some(o.iter().map(|&k| prev[k as usize]).collect())
+                    }
+                };
+            }
             let decoded = if tracks_state {
                 let limits = dlgs::Limits::default();
                 Some(decode_canonical(ty, &payload, 0, &s, &limits).expect("canonical chunk")?)
@@ -200,7 +224,7 @@ impl<W: Write> StreamEncoder<W> {
         &mut self,
         canon: &Canonical,
         first: bool,
-    ) -> Result<(ChunkType, Vec<u8>)> {
+    ) -> Result<(ChunkType, Vec<u8>, Option<Vec<u32>>)> {
         Ok(match self.cfg.coding.codec {
             CanonicalCodec::Raw => (
                 ChunkType::CRAW,
@@ -209,6 +233,7 @@ impl<W: Write> StreamEncoder<W> {
                     self.cfg.coding.raw_codec,
                     self.cfg.container.zstd_level,
                 )?,
+                None,
             ),
             CanonicalCodec::Sorted { bits, sort } => {
                 // Residual GOPs add offsets to the stored rotations and scales: only scenes
@@ -319,10 +344,7 @@ impl<W: Write> StreamEncoder<W> {
                     }
                 }
                 let order: Vec<u32> = stored.iter().map(|&k| order[k as usize]).collect();
-                if first {
-                    self.static_order = Some(order);
-                }
-                (ChunkType::CSOG, payload)
+                (ChunkType::CSOG, payload, Some(order))
             }
         })
     }

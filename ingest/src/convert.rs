@@ -45,6 +45,7 @@ pub fn scene_header(gops: &[RefGop], fps: u32) -> Result<SceneHeader, IngestErro
         frame_count: gops.len() as u32 * GOP_LENGTH,
         n_static: first.statics.len() as u32,
         n_dynamic: first.dynamics.len() as u32,
+        refresh_interval: 0,
     })
 }
 

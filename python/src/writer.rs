@@ -131,6 +131,7 @@ fn header(o: &StreamOptions, first: &Gop, gops: u32) -> Res<SceneHeader> {
         frame_count: o.frame_count.unwrap_or(gops * o.gop_length),
         n_static: c.statics.len() as u32,
         n_dynamic: c.dynamics.len() as u32,
+        refresh_interval: 0,
     })
 }
 

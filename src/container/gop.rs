@@ -54,6 +54,9 @@ impl GopHeader {
         use crate::container::header::ResidualMode::*;
         let reference_gop = match (scene.residual_mode, g) {
             (_, 0) | (Intra, _) => NO_REFERENCE,
+            (Sequential, g) if scene.refresh_interval != 0 && g % scene.refresh_interval == 0 => {
+                NO_REFERENCE
+            }
             (Sequential, g) => g - 1,
             (Parallel, _) => 0,
         };

@@ -9,7 +9,7 @@ use crate::limits::Limits;
 /// The 8 magic bytes that open every `.dlgs` file.
 pub const MAGIC: [u8; 8] = [0x89, b'D', b'L', b'G', b'S', b'\r', b'\n', 0x1a];
 pub const VERSION_MAJOR: u16 = 1;
-pub const VERSION_MINOR: u16 = 16;
+pub const VERSION_MINOR: u16 = 17;
 /// Magic + major + minor.
 pub const SIGNATURE_LEN: u64 = 12;
 /// Length of a v1.0 `HEAD` payload. Longer payloads are accepted (fields are only appended).
@@ -96,6 +96,10 @@ pub struct SceneHeader {
     pub n_static: u32,
     /// Dynamic primitives per GOP (constant over GOPs).
     pub n_dynamic: u32,
+    /// Sequential mode only (since 1.17): every GOP `g` with `g % refresh_interval == 0`
+    /// carries its full canonical state (no reference GOP), so a cold seek walks at most
+    /// `refresh_interval - 1` residual steps. 0 = no refresh (only GOP 0 is intra).
+    pub refresh_interval: u32,
 }
 
 impl SceneHeader {
@@ -117,6 +121,7 @@ impl SceneHeader {
             frame_count: 1,
             n_static,
             n_dynamic: 0,
+            refresh_interval: 0,
         }
     }
 
@@ -164,6 +169,7 @@ impl SceneHeader {
         ] {
             b.put_u32(v);
         }
+        b.put_u32(self.refresh_interval);
         b.resize(HEAD_LEN_V1, 0);
         b
     }
@@ -253,6 +259,7 @@ impl SceneHeader {
         let (frame_count, a_fc) = next("frame_count")?;
         let (n_static, a_ns) = next("n_static")?;
         let (n_dynamic, a_nd) = next("n_dynamic")?;
+        let (refresh_interval, a_ri) = next("refresh_interval")?;
         if fps_num == 0 {
             return Err(bad("fps_num", 0, "must be > 0", a_num));
         }
@@ -313,6 +320,22 @@ impl SceneHeader {
                 a_nd,
             ));
         }
+        if refresh_interval == 1 {
+            return Err(bad(
+                "refresh_interval",
+                1,
+                "must be 0 (no refresh) or at least 2 (use residual_mode 0 for all-intra)",
+                a_ri,
+            ));
+        }
+        if refresh_interval != 0 && residual_mode != ResidualMode::Sequential {
+            return Err(bad(
+                "refresh_interval",
+                refresh_interval as u64,
+                "only sequential scenes (residual_mode 1) refresh",
+                a_ri,
+            ));
+        }
         Ok(SceneHeader {
             variant,
             residual_mode,
@@ -329,6 +352,7 @@ impl SceneHeader {
             frame_count,
             n_static,
             n_dynamic,
+            refresh_interval,
         })
     }
 }

@@ -5,7 +5,7 @@ use std::io::Write;
 use crate::bytes::PutLe;
 use crate::container::chunk::{encode_header, ChunkType, FLAG_MUST_UNDERSTAND, SCENE_LEVEL};
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
-use crate::container::header::{encode_signature, SceneHeader};
+use crate::container::header::{encode_signature, ResidualMode, SceneHeader};
 use crate::error::{io_err, Error, Result};
 
 pub struct Writer<W: Write> {
@@ -20,6 +20,12 @@ pub struct Writer<W: Write> {
 impl<W: Write> Writer<W> {
     /// Write the signature and `HEAD`.
     pub fn new(out: W, scene: SceneHeader) -> Result<Self> {
+        let r = scene.refresh_interval;
+        if r == 1 || (r != 0 && scene.residual_mode != ResidualMode::Sequential) {
+            return Err(Error::input(format!(
+                "refresh_interval {r}: 0, or at least 2 in a sequential scene (format-spec §4.1)"
+            )));
+        }
         let mut w = Writer {
             out,
             pos: 0,

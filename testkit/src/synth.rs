@@ -39,6 +39,8 @@ pub struct SynthSpec {
     /// Sequential/parallel: GOP g >= 1 carries a generated binary voxel residual field
     /// against GOP g-1 / GOP 0.
     pub residual_mode: ResidualMode,
+    /// Sequential mode: every K-th GOP carries its full canonical state (0 = none).
+    pub refresh_interval: u32,
 }
 
 impl Default for SynthSpec {
@@ -56,6 +58,7 @@ impl Default for SynthSpec {
             deform_model: DeformModel::Reference,
             seed: 6666,
             residual_mode: ResidualMode::Intra,
+            refresh_interval: 0,
         }
     }
 }
@@ -374,6 +377,7 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
         frame_count: frames,
         n_static: statics.len() as u32,
         n_dynamic: n_dyn as u32,
+        refresh_interval: spec.refresh_interval,
     };
 
     // Per-channel temporal frequency (Hz), spatial direction and wavelength.

@@ -41,6 +41,9 @@ pub struct SequenceSettings {
     pub min_confident: f64,
     /// How GOPs after the first carry their canonical state.
     pub residual_mode: ResidualMode,
+    /// Sequential mode: every K-th GOP carries its full canonical state so that a cold seek
+    /// walks at most K-1 residuals (format-spec §4.1, since 1.17); 0 = only GOP 0.
+    pub refresh_interval: u32,
     /// With a residual mode other than intra: residuals as fitted binary voxel fields
     /// (`RNTC`) with these settings; `None` sends explicit residuals (`RDLT`). The default,
     /// sequential fields, measured best on the wave sequence: 2,345 bytes/frame at 50.05 dB
@@ -57,6 +60,7 @@ impl Default for SequenceSettings {
             key_interval: 10,
             min_confident: 0.9,
             residual_mode: ResidualMode::Sequential,
+            refresh_interval: 0,
             residual_field: Some(NtcFitSettings::default()),
         }
     }
@@ -114,6 +118,8 @@ struct Refit {
 /// What [`write`] measured of the residual fields it fitted, per GOP after the first.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct WriteReport {
+    /// The GOPs that carry a residual field (not GOP 0, not refresh GOPs), in order.
+    pub field_gops: Vec<usize>,
     pub fields: Vec<NtcFitReport>,
     /// The refitted GOPs' fits (replacing those of [`SequenceReport::gops`] from GOP 1 on).
     pub refits: Vec<GopFit>,
@@ -295,6 +301,7 @@ pub fn build(
         frame_count: total as u32,
         n_static: static_ids.len() as u32,
         n_dynamic: dyn_ids.len() as u32,
+        refresh_interval: s.refresh_interval,
         ..SceneHeader::still(static_ids.len() as u32, sh_degree)
     };
     let mut gops = Vec::with_capacity(gop_count);
@@ -342,7 +349,8 @@ pub fn write_with_report<W: std::io::Write>(
     let mut report = WriteReport::default();
     let l = model.scene.gop_length as usize;
     for (g, (canonical, field)) in model.gops.iter().enumerate() {
-        let refit = model.refit.as_ref().filter(|_| g > 0);
+        // GOP 0 and refresh GOPs (no reference GOP) carry their own canonical state.
+        let refit = model.refit.as_ref().filter(|_| enc.reference_state().is_some());
         let Some(r) = refit else {
             enc.push(
                 crate::GopCanonical::State(canonical),
@@ -376,6 +384,7 @@ pub fn write_with_report<W: std::io::Write>(
             model.scene.key_interval as usize,
         );
         enc.push(crate::GopCanonical::Ntc(&ntc), Some(&refitted))?;
+        report.field_gops.push(g);
         report.fields.push(fit_report);
         report.refits.push(gop_fit);
     }
