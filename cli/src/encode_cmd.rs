@@ -11,8 +11,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::pending_file::PendingFile;
 use crate::scene_io::is_dlgs;
 
-use crate::codec_args::{parse_residual_mode, refresh_interval};
 pub use crate::codec_args::CodecArgs;
+use crate::codec_args::{parse_residual_mode, refresh_interval};
 
 pub(crate) fn meta(input: &Path, extra: serde_json::Value) -> serde_json::Value {
     serde_json::json!({

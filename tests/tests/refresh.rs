@@ -90,7 +90,12 @@ fn refresh_gops_carry_the_chain_state_and_cut_the_chain() {
         .enumerate()
         .all(|(g, &(ty, r))| ty == ChunkType::RNTC && r == g as u32));
     // Each refresh costs the canonical state's bytes over the residual's.
-    assert!(bytes.len() > plain.len(), "{} vs {}", bytes.len(), plain.len());
+    assert!(
+        bytes.len() > plain.len(),
+        "{} vs {}",
+        bytes.len(),
+        plain.len()
+    );
     // The same states as the chain gives, bit for bit, on 1 and 2 threads and streamed.
     for threads in [1, 2] {
         let states = on_threads(threads, || {
@@ -100,7 +105,10 @@ fn refresh_gops_carry_the_chain_state_and_cut_the_chain() {
                 .collect::<Vec<_>>()
         });
         for g in 0..GOPS as usize {
-            assert!(body(&states[g]) == body(&want[g]), "GOP {g}, {threads} threads");
+            assert!(
+                body(&states[g]) == body(&want[g]),
+                "GOP {g}, {threads} threads"
+            );
         }
     }
     let streamed = decode_all_stream(&bytes, Limits::default()).unwrap();

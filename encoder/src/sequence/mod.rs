@@ -350,7 +350,10 @@ pub fn write_with_report<W: std::io::Write>(
     let l = model.scene.gop_length as usize;
     for (g, (canonical, field)) in model.gops.iter().enumerate() {
         // GOP 0 and refresh GOPs (no reference GOP) carry their own canonical state.
-        let refit = model.refit.as_ref().filter(|_| enc.reference_state().is_some());
+        let refit = model
+            .refit
+            .as_ref()
+            .filter(|_| enc.reference_state().is_some());
         let Some(r) = refit else {
             enc.push(
                 crate::GopCanonical::State(canonical),

@@ -70,6 +70,12 @@ pub fn all(base: &[u8], tiny: &Canonical, tiny_scene: &SceneHeader) -> Vec<Vecto
     let mut bad_crc = base.to_vec();
     let n = bad_crc.len();
     bad_crc[n - 1] ^= 1;
+    // HEAD's payload starts after the signature (12) and its chunk header (24).
+    let mut head = base[36..36 + 64].to_vec();
+    head[40..44].copy_from_slice(&3u32.to_le_bytes());
+    let mut refresh = base[..12].to_vec();
+    refresh.extend(chunk(ChunkType::HEAD, FLAG_MUST_UNDERSTAND, SCENE, &head));
+    refresh.extend_from_slice(&base[12 + 24 + 64 + 4..]);
     let mut bad_gop = base.to_vec();
     bad_gop[n - TAIL_LEN..n - TAIL_LEN + 24].copy_from_slice(&encode_header(
         ChunkType::TAIL,
@@ -95,6 +101,12 @@ pub fn all(base: &[u8], tiny: &Canonical, tiny_scene: &SceneHeader) -> Vec<Vecto
             bytes: trailing,
             error: Some("Decompress"),
             about: "tiny-still's CRAW as codec 1 (zstd) with 4 bytes (01 02 03 04, not a zstd frame) after its one frame; every CRC valid",
+        },
+        Vector {
+            name: "x-refresh-intra",
+            bytes: refresh,
+            error: Some("InvalidField"),
+            about: "tiny-still's HEAD with refresh_interval 3 (offset 40, since 1.17) in an intra scene (only sequential scenes refresh); payload CRC valid",
         },
         Vector {
             name: "x-tail-payload-crc",

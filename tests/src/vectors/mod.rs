@@ -140,6 +140,12 @@ pub fn all() -> Vec<Vector> {
         error: None,
         about: "3 sequential GOPs of 512 lod3 Gaussians: GOP 0 CRAW, GOP 1 a generated binary voxel residual field (RNTC, small grids), GOP 2 explicit residuals (RDLT: positions within 1e-4, SH DC within 2e-3, the rest exact); exact TFEA",
     });
+    v.push(Vector {
+        name: "lod3-refresh",
+        bytes: refresh_vector(&lod3),
+        error: None,
+        about: "4 sequential GOPs of 10 frames (keys every 5) of 512 lod3 Gaussians at SH degree 0 with refresh_interval 2 (since 1.17): GOP 0 CRAW, GOP 1 a generated RNTC field, GOP 2 a refresh GOP (CRAW of the state GOP 1's field applied twice gives; no reference), GOP 3 an RNTC field against GOP 2; exact TFEA",
+    });
     v.extend(paths::all(&lod3));
     let mut bad = |name, error, about, f: &dyn Fn(&mut Vec<u8>)| {
         let mut b = base.clone();
@@ -470,6 +476,49 @@ fn residual_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
         .unwrap();
     enc.push(GopCanonical::State(&s2), Some(&m.gops[2]))
         .unwrap();
+    enc.finish().unwrap()
+}
+
+/// 4 sequential GOPs with `refresh_interval` 2: the same generated field in GOPs 1-3, GOP 2
+/// written as the full state it gives.
+fn refresh_vector(scene: &dlgs::Gaussians) -> Vec<u8> {
+    use dlgs::container::header::ResidualMode;
+    use dlgs::model::ntc::NtcConfig;
+    use dlgs_encoder::{GopCanonical, StreamEncoder};
+    use dlgs_testkit::synth::{synth_dynamic, synth_ntc, SynthSpec};
+    let spec = SynthSpec {
+        dynamic_fraction: 0.25,
+        max_dynamic: 64,
+        gops: 4,
+        gop_length: 10,
+        key_interval: 5,
+        residual_mode: ResidualMode::Sequential,
+        refresh_interval: 2,
+        ..Default::default()
+    };
+    let m = synth_dynamic(&first_512(scene).with_sh_degree(0), &spec).unwrap();
+    let small = NtcConfig {
+        resolutions: vec![16, 32],
+        features: 2,
+        log2_table: 8,
+        gate_resolution: 8,
+        gate_log2_table: 8,
+    };
+    let field = synth_ntc(&m.canonical, &mut fastrand::Rng::with_seed(78), 1.0, small);
+    let cfg = dlgs_encoder::EncoderConfig {
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: dlgs_encoder::FeatureCodec::Exact,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut enc = StreamEncoder::new(Vec::new(), m.scene.clone(), cfg).unwrap();
+    enc.push(GopCanonical::State(&m.canonical), Some(&m.gops[0]))
+        .unwrap();
+    for g in 1..4 {
+        enc.push(GopCanonical::Ntc(&field), Some(&m.gops[g]))
+            .unwrap();
+    }
     enc.finish().unwrap()
 }
 
