@@ -33,6 +33,10 @@ pub struct PlayArgs {
     pub language: bool,
     #[arg(long)]
     pub json: bool,
+    /// Threads that decode the next GOPs while frames play (GOP 0 uses every core). 1 keeps a
+    /// core for the frames on a 2-core machine: docs/benchmarks/play.md has the drops for 1 and 2.
+    #[arg(long, default_value_t = 1)]
+    pub gop_threads: usize,
 }
 
 /// A `Read` that delivers at most `bytes_per_s`, sleeping as a slow link would.
@@ -105,6 +109,7 @@ pub fn run_play(args: &PlayArgs) -> Result<()> {
     let src = open_source(args)?;
     let (tx, rx) = sync_channel::<GopMsg>(1);
     let (scene_tx, scene_rx) = sync_channel(1);
+    let background_threads = args.gop_threads.max(1);
     let reader = std::thread::spawn(move || {
         let mut dec = match StreamDecoder::new(src) {
             Ok(d) => d,
@@ -113,10 +118,33 @@ pub fn run_play(args: &PlayArgs) -> Result<()> {
                 return;
             }
         };
+        // GOP 0 decodes on every core (nothing plays yet: the first frame waits for it); later
+        // GOPs decode ahead on one thread of their own, so that the frames being shown keep
+        // the other core and never queue behind a GOP's work in a shared pool.
+        let ahead = rayon::ThreadPoolBuilder::new()
+            .num_threads(background_threads)
+            .thread_name(|i| format!("dlgs-gop-ahead-{i}"))
+            .build();
+        let ahead = match ahead {
+            Ok(p) => p,
+            Err(e) => {
+                let _ = scene_tx.send(Err(dlgs::Error::input(format!(
+                    "starting the GOP decode thread: {e}"
+                ))));
+                return;
+            }
+        };
         let _ = scene_tx.send(Ok(dec.scene().clone()));
+        let mut first = true;
         loop {
             let t0 = Instant::now();
-            match dec.next_gop() {
+            let next = if first {
+                dec.next_gop()
+            } else {
+                ahead.install(|| dec.next_gop())
+            };
+            first = false;
+            match next {
                 Ok(Some(g)) => {
                     let total = t0.elapsed().as_secs_f64() * 1e3;
                     let decode = dec.last_decode_time().as_secs_f64() * 1e3;
