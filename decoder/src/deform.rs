@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use dlgs::container::header::DeformModel;
 use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
-use dlgs::Result;
+use dlgs::{Error, Result};
 use rayon::prelude::*;
 
 use crate::interp::{hermite, normalize4, slerp_angle, slerp_blend};
@@ -265,30 +265,57 @@ impl Deformer {
         opts: &FrameOptions,
         out: &mut Gaussians,
     ) -> Result<()> {
+        self.frame_into_after(canon, key, delta, opts, out, 0)
+    }
+
+    /// Like [`Self::frame_into`], writing the dynamic Gaussians as rows `first..` of `out`
+    /// and leaving its first `first` rows as they are (e.g. the static set: the merged
+    /// frame is then built without copying the dynamic set). `out` must have `first` rows with
+    /// `canon`'s SH degree and language width.
+    pub fn frame_into_after(
+        &self,
+        canon: &Gaussians,
+        key: usize,
+        delta: f32,
+        opts: &FrameOptions,
+        out: &mut Gaussians,
+        first: usize,
+    ) -> Result<()> {
+        if first > 0
+            && (out.len() < first
+                || out.sh_degree != canon.sh_degree
+                || out.lang_width != canon.lang_width)
+        {
+            return Err(Error::request(
+                "frame_into_after: the first rows differ from the dynamic set in layout",
+            ));
+        }
         // The two keys the frame interpolates (decoded now if the features are per key).
         self.features.ensure_keys(key..key + 2)?;
         let n = self.features().n;
         let language = opts.language && self.lang.is_some() && canon.has_language();
         out.sh_degree = canon.sh_degree;
         out.lang_width = canon.lang_width;
-        out.positions.resize(n, [0.0; 3]);
-        out.log_scales.resize(n, [0.0; 3]);
-        out.rotations.resize(n, [0.0; 4]);
-        out.opacity.resize(n, 0.0);
-        out.lang_opacity.resize(canon.lang_opacity.len(), 0.0);
-        out.sh.resize(canon.sh.len(), 0.0);
-        out.lang.resize(canon.lang.len(), 0.0);
-        let blocks = block_ranges(n);
         let stride = canon.sh_stride();
         let lw = canon.lang_width;
         let lo = usize::from(canon.has_language());
-        let mut pos = split_rows(&mut out.positions, 1, &blocks).into_iter();
-        let mut scale = split_rows(&mut out.log_scales, 1, &blocks).into_iter();
-        let mut rot = split_rows(&mut out.rotations, 1, &blocks).into_iter();
-        let mut opacity = split_rows(&mut out.opacity, 1, &blocks).into_iter();
-        let mut lang_opacity = split_rows(&mut out.lang_opacity, lo, &blocks).into_iter();
-        let mut sh = split_rows(&mut out.sh, stride, &blocks).into_iter();
-        let mut lang = split_rows(&mut out.lang, lw, &blocks).into_iter();
+        out.positions.resize(first + n, [0.0; 3]);
+        out.log_scales.resize(first + n, [0.0; 3]);
+        out.rotations.resize(first + n, [0.0; 4]);
+        out.opacity.resize(first + n, 0.0);
+        out.lang_opacity
+            .resize(first * lo + canon.lang_opacity.len(), 0.0);
+        out.sh.resize(first * stride + canon.sh.len(), 0.0);
+        out.lang.resize(first * lw + canon.lang.len(), 0.0);
+        let blocks = block_ranges(n);
+        let mut pos = split_rows(&mut out.positions[first..], 1, &blocks).into_iter();
+        let mut scale = split_rows(&mut out.log_scales[first..], 1, &blocks).into_iter();
+        let mut rot = split_rows(&mut out.rotations[first..], 1, &blocks).into_iter();
+        let mut opacity = split_rows(&mut out.opacity[first..], 1, &blocks).into_iter();
+        let mut lang_opacity =
+            split_rows(&mut out.lang_opacity[first * lo..], lo, &blocks).into_iter();
+        let mut sh = split_rows(&mut out.sh[first * stride..], stride, &blocks).into_iter();
+        let mut lang = split_rows(&mut out.lang[first * lw..], lw, &blocks).into_iter();
         let jobs: Vec<BlockOut> = blocks
             .iter()
             .map(|rows| BlockOut {

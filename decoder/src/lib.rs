@@ -317,4 +317,44 @@ impl<R: Read + Seek> Decoder<R> {
         let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
         DecodedGop::frame(&gop, time, opts, reuse)
     }
+
+    /// The Gaussians at `t` as [`Frame::merged`] gives them (static then dynamic), built
+    /// with one copy of the static set: the dynamic set is decoded straight into its rows of
+    /// the merged buffers (new, exact-size allocations the caller owns).
+    pub fn frame_at_merged(&mut self, t: f64, opts: &FrameOptions) -> Result<Gaussians> {
+        let time = self.scene().locate(t)?;
+        let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        let (statics, canon) = (&gop.canonical.statics, &gop.canonical.dynamics);
+        let same_layout =
+            statics.sh_degree == canon.sh_degree && statics.lang_width == canon.lang_width;
+        match &gop.deformer {
+            Some(d) if same_layout => {
+                let mut out = with_room(statics, canon.len());
+                d.frame_into_after(canon, time.key, time.delta, opts, &mut out, statics.len())?;
+                Ok(out)
+            }
+            _ => Ok(DecodedGop::frame(&gop, time, opts, Gaussians::default())?.merged()),
+        }
+    }
+}
+
+/// `g`'s rows in new buffers with room for `more` rows of the same layout.
+fn with_room(g: &Gaussians, more: usize) -> Gaussians {
+    fn copy<T: Copy>(v: &[T], extra: usize) -> Vec<T> {
+        let mut out = Vec::with_capacity(v.len() + extra);
+        out.extend_from_slice(v);
+        out
+    }
+    let lo = usize::from(g.has_language());
+    Gaussians {
+        sh_degree: g.sh_degree,
+        lang_width: g.lang_width,
+        positions: copy(&g.positions, more),
+        log_scales: copy(&g.log_scales, more),
+        rotations: copy(&g.rotations, more),
+        opacity: copy(&g.opacity, more),
+        lang_opacity: copy(&g.lang_opacity, more * lo),
+        sh: copy(&g.sh, more * g.sh_stride()),
+        lang: copy(&g.lang, more * g.lang_width),
+    }
 }
