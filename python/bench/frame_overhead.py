@@ -52,5 +52,5 @@ for language in (False, True):
             py += b
         a, b = statistics.median(rust), statistics.median(py)
         what = ("colour + language" if language else "colour") + (
-            ", split (static shared)" if split else ", merged (static + dynamic copied)")
+            ", split (static shared)" if split else ", merged (static copied, dynamic decoded in place)")
         print(f"| {what} | {a * 1e3:.2f} ms | {b * 1e3:.2f} ms | {100 * (b / a - 1):+.1f} % |")

@@ -371,8 +371,14 @@ mod tests {
         g
     }
 
-    fn max_gap(book: &[f64]) -> f64 {
-        book.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max)
+    /// `got` is the entry of `book` nearest `x`.
+    fn assert_nearest(book: &[f64], x: f32, got: f32) {
+        let best = book
+            .iter()
+            .map(|b| (x as f64 - b).abs())
+            .fold(f64::INFINITY, f64::min);
+        assert!(book.contains(&(got as f64)), "{got} not in the codebook");
+        assert_eq!((x as f64 - got as f64).abs(), best, "{x} -> {got}");
     }
 
     #[test]
@@ -387,8 +393,10 @@ mod tests {
             );
             let files = write_sog_files(&g).unwrap();
             let meta: serde_json::Value = serde_json::from_slice(&files[0].1).unwrap();
+            // As the reader takes them: f32 (serde_json's f64 parse may be an ulp off).
             let book = |k: &str| -> Vec<f64> {
-                serde_json::from_value(meta[k]["codebook"].clone()).unwrap()
+                let v: Vec<f64> = serde_json::from_value(meta[k]["codebook"].clone()).unwrap();
+                v.iter().map(|&x| x as f32 as f64).collect()
             };
             let (sb, db) = (book("scales"), book("sh0"));
             for i in 0..n {
@@ -396,19 +404,9 @@ mod tests {
                     // 16 bits over a log-domain range of about 2 ln(11): under 1e-3 here.
                     let (p, q) = (g.positions[i][a], back.positions[i][a]);
                     assert!((p - q).abs() <= 1e-3 * (1.0 + p.abs()), "{p} {q}");
-                    let (s, t) = (g.log_scales[i][a], back.log_scales[i][a]);
-                    assert!(
-                        ((s - t).abs() as f64) <= max_gap(&sb) / 2.0 + 1e-6,
-                        "{s} {t}"
-                    );
-                    let (c, d) = (
-                        g.sh[i * back.sh_stride() + a],
-                        back.sh[i * back.sh_stride() + a],
-                    );
-                    assert!(
-                        ((c - d).abs() as f64) <= max_gap(&db) / 2.0 + 1e-6,
-                        "{c} {d}"
-                    );
+                    assert_nearest(&sb, g.log_scales[i][a], back.log_scales[i][a]);
+                    let j = i * back.sh_stride() + a;
+                    assert_nearest(&db, g.sh[j], back.sh[j]);
                 }
                 let q = g.rotations[i];
                 let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();
@@ -428,10 +426,7 @@ mod tests {
                         .filter(|(j, _)| j % s >= 3)
                         .map(|(_, p)| p)
                 {
-                    assert!(
-                        ((x - y).abs() as f64) <= max_gap(&rb) / 2.0 + 1e-6,
-                        "{x} {y}"
-                    );
+                    assert_nearest(&rb, *x, *y);
                 }
             }
         }
