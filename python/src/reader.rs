@@ -474,7 +474,8 @@ impl Reader {
             self.scene.lang_dims as usize,
         );
         let answers = self.detach(py, || {
-            let g = self.gaussians_for(t, &cam, true, false).map_err(to_py)?;
+            // Scaffold-GS: only the anchors in view (the same image).
+            let g = self.gaussians_for(t, &cam, true, true).map_err(to_py)?;
             view::query_arrays(&g, &cam, &dec, &positives, &negatives, shape, &params)
         })?;
         let list = view::answers_to_list(py, answers)?;

@@ -8,7 +8,7 @@ import pytest
 
 import dlgs
 from conftest import REPO, run_cli
-from pngread import quantise, read_png_rgb8
+from pngread import quantise, read_png8, read_png_rgb8
 from test_roundtrip import assert_same
 
 FIXTURE = REPO / "tests" / "fixtures" / "scaffold_run"
@@ -94,3 +94,28 @@ def test_render_equals_cli_render(scaffold, work):
     assert np.array_equal(r.render(2.5, cams[1], cull=False).view(np.uint32),
                           rgb.view(np.uint32))
     assert rgb.std() > 0.01
+
+
+def test_query_equals_cli(scaffold, labelled, work):
+    """The neural Gaussians' language answers a query as `dlgs query` does (the HAC ingest
+    stores no language decoder: it is given, with the negatives)."""
+    r = dlgs.open(scaffold)
+    cams = r.cameras(count=4, width=320, height=240)
+    camfile = work / "scaffold_query_cams.json"
+    camfile.write_text(json.dumps(cams))
+    dec, neg = labelled / "lang_decoder.safetensors", labelled / "negatives.npy"
+    with pytest.raises(dlgs.RequestError, match="lang_decoder"):
+        r.query(np.load(labelled / "category_1.npy").reshape(-1), 0.5, cams[0])
+    for view in (0, 2):
+        prefix = work / f"scaffold_q_{view}"
+        report = json.loads(run_cli(
+            "query", scaffold, "--t", 0.5, "--text-embedding", labelled / "category_1.npy",
+            "--lang-decoder", dec, "--negatives", neg, "--cameras", camfile, "--view", view,
+            "-o", prefix, "--json"))[0]
+        a = r.query(np.load(labelled / "category_1.npy").reshape(-1), 0.5, cams[view],
+                    lang_decoder=dec, negatives=np.load(neg).astype(np.float32))
+        assert a["level"] + 1 == report["level"]
+        assert np.array_equal(np.float32(a["scores"]), np.float32(report["scores"]))
+        assert int(a["mask"].sum()) == report["selected_pixels"]
+        assert np.array_equal(read_png8(str(prefix) + ".mask.png", 1)[..., 0] == 255, a["mask"])
+        assert np.ptp(a["relevance"]) > 0  # the language image is not constant
