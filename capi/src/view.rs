@@ -42,7 +42,8 @@ fn camera_of(v: &DlgsView) -> Result<Camera, String> {
         .chain(&v.world_to_camera)
         .all(|x| x.is_finite())
         && [v.fx, v.fy, v.cx, v.cy].iter().all(|x| x.is_finite());
-    if !finite || v.width == 0 || v.height == 0 || !(v.fx > 0.0) || !(v.fy > 0.0) {
+    // `finite` first: the comparisons below then see no NaN.
+    if !finite || v.width == 0 || v.height == 0 || v.fx <= 0.0 || v.fy <= 0.0 {
         return Err("the view needs finite values, width and height > 0, fx and fy > 0".into());
     }
     let m = &v.world_to_camera;
