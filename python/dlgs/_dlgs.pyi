@@ -55,7 +55,11 @@ class Reader:
         """The Gaussians at t seconds (between frames too): static then dynamic in one dict,
         or {"static": ..., "dynamic": ...} with split=True (static arrays shared and
         read-only within a GOP). camera: viewpoint of the view-dependent decoders (None:
-        the origin). language: evaluate the language decoder of dynamic Gaussians."""
+        the origin). language: evaluate the language decoder of dynamic Gaussians.
+        Scaffold-GS files (info["variant"] == "scaffold"): camera is required (ValueError
+        without it); cull: decode only the anchors in the camera's view; neural: the MLP
+        outputs (scales, colors RGB, tanh opacities, anchor, offset) instead of the 3DGS
+        form (SH DC, log-scales, opacity logits)."""
     def render(self, t: float, camera: Camera, width: Optional[int] = None,
                height: Optional[int] = None, features: bool = False,
                background: Tuple[float, float, float] = (1.0, 1.0, 1.0), cull: bool = True
