@@ -16,6 +16,7 @@ mod ntc_dict;
 #[cfg(feature = "hevc")]
 mod ntc_input;
 mod reader;
+mod recycle;
 mod scaffold;
 mod scenes;
 mod splat_write;

@@ -42,6 +42,8 @@ pub struct Reader {
     pool: Option<rayon::ThreadPool>,
     /// The default orbit of the last GOP a camera index was resolved in.
     orbit: Mutex<Option<(u32, Vec<Camera>)>>,
+    /// The arrays of the last merged frames, decoded into again once Python lets go of them.
+    pub(crate) recycler: crate::recycle::Recycler,
 }
 
 pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -100,6 +102,7 @@ pub fn open_reader(
         version,
         statics: Mutex::new(None),
         orbit: Mutex::new(None),
+        recycler: Default::default(),
         pool: match threads {
             None => None,
             Some(n) => Some(
@@ -240,12 +243,19 @@ impl Reader {
             language: language && self.scene.lang_width() > 0,
         };
         if !split {
-            // The static set is copied once into new merged buffers and the dynamic set is
-            // decoded straight into their tail; numpy then takes the buffers over (no copy).
+            // Into the arrays of an earlier frame Python has released, if any (warm memory:
+            // the static rows copied, the dynamic rows decoded in place) ...
+            if let Some(d) = self.decode_into_free(py, t, &opts)? {
+                return Ok(d);
+            }
+            // ... else the static set is copied once into new merged buffers and the dynamic
+            // set is decoded straight into their tail; numpy then takes the buffers over.
             let g = self
                 .detach(py, || self.dec()?.frame_at_merged(t, &opts))
                 .py_err()?;
-            return gaussians_to_dict(py, g);
+            let d = gaussians_to_dict(py, g)?;
+            self.recycler.remember(&d)?;
+            return Ok(d);
         }
         let frame = self
             .detach(py, || self.dec()?.frame_at(t, &opts))
