@@ -45,3 +45,17 @@ def test_arrays_still_reachable_are_not_overwritten(dyn_exact):
     del ro
     r.frame(0.7)
     assert_same(keep, ro_want)
+
+
+def test_a_plain_loop_alternates_between_two_sets(dyn_exact):
+    """`f = r.frame(t)` in a loop holds the previous frame during the call: the one before it
+    is free and decoded into, so a loop cycles through two sets of arrays."""
+    r, fresh = dlgs.open(dyn_exact), dlgs.open(dyn_exact)
+    ptrs = []
+    f = None
+    for i in range(6):
+        f = r.frame(0.1 * i)
+        ptrs.append(ptr(f["positions"]))
+    a, b = ptrs[:2]
+    assert a != b and ptrs == [a, b, a, b, a, b]
+    assert_same(f, fresh.frame(0.5))
