@@ -284,11 +284,16 @@ pub(crate) fn print_report(r: &PlayReport, json: bool) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    println!(
-        "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
-        list(&r.gop_decode_ms),
-        list(&r.gop_ready_ms)
-    );
+    if r.gaussians_mean.is_some() {
+        // Scaffold-GS: GOPs are decoded on the player's thread, from the file.
+        println!("GOP decode (player thread): {} ms", list(&r.gop_decode_ms));
+    } else {
+        println!(
+            "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
+            list(&r.gop_decode_ms),
+            list(&r.gop_ready_ms)
+        );
+    }
     println!("player stalled {:.1} ms waiting for GOPs", r.stall_ms);
     if let Some(n) = r.gaussians_mean {
         println!("Scaffold-GS: {n:.0} neural Gaussians per frame (mean)");
