@@ -29,6 +29,11 @@ typedef enum DlgsStatus {
   // The stream's time features are HEVC and this library has no HEVC decoder (built
   // without FFmpeg): set one with `dlgs_set_hevc_decoder`.
   DLGS_STATUS_NO_HEVC_DECODER = 7,
+  // The call does not apply to the file's variant: a Scaffold-GS file (variant 1) generates
+  // its Gaussians per camera, decode it with `dlgs_decode_frame_view`.
+  DLGS_STATUS_WRONG_VARIANT = 8,
+  // A bad argument (e.g. a camera with a zero size or a non-finite value).
+  DLGS_STATUS_BAD_ARGUMENT = 9,
 } DlgsStatus;
 
 // An open stream. Opaque to C.
@@ -53,6 +58,11 @@ typedef struct DlgsInfo {
   uint32_t sh_coeffs;
   // Language feature width per Gaussian (0 = no language; DLGStream: 9 = 3 levels x 3).
   uint32_t lang_width;
+  // 0: 3D Gaussians (`dlgs_decode_frame`); 1: Scaffold-GS anchors, whose Gaussians are
+  // generated per camera (`dlgs_decode_frame_view`). For variant 1, `n_static` and
+  // `n_dynamic` count anchors and `n_gaussians` is the most Gaussians a frame can have
+  // (10 per anchor): a frame has as many as the camera makes visible.
+  uint32_t variant;
 } DlgsInfo;
 
 // Caller-owned output buffers for one frame, `capacity` Gaussians each. Any pointer may be
@@ -92,6 +102,28 @@ typedef int32_t (*DlgsHevcDecodeFn)(void *user,
                                     uint32_t height,
                                     size_t expect,
                                     uint16_t *out);
+
+// A camera: its centre, and for frustum culling (`cull` != 0) its orientation and
+// intrinsics, as a 3DGS `cameras.json` entry holds them.
+typedef struct DlgsView {
+  // Camera centre in world coordinates: the viewpoint of the view-dependent decoders.
+  float camera_center[3];
+  // World-to-camera rotation, row-major (x right, y down, z forward: OpenCV / 3DGS); the
+  // transpose of `cameras.json`'s camera-to-world `rotation`.
+  float world_to_camera[9];
+  // Focal lengths and principal point in pixels.
+  float fx;
+  float fy;
+  float cx;
+  float cy;
+  // Image size in pixels.
+  uint32_t width;
+  uint32_t height;
+  // Scaffold-GS files: non-zero decodes only the anchors whose Gaussians can reach into the
+  // image (the same picture, less time); 0 decodes every anchor (then only `camera_center`
+  // is read). Ignored for 3DGS files.
+  int32_t cull;
+} DlgsView;
 
 #ifdef __cplusplus
 extern "C" {
@@ -156,6 +188,24 @@ const char *dlgs_version(void);
 // NULL or a function that follows `DlgsHevcDecodeFn`'s contract with `user` for as long as
 // the decoder is open.
 enum DlgsStatus dlgs_set_hevc_decoder(struct DlgsDecoder *d, DlgsHevcDecodeFn decode, void *user);
+
+// Decode the Gaussians `view` sees at time `t` seconds into `buffers` (layout and
+// conventions of `dlgs_decode_frame`). For a Scaffold-GS file the neural Gaussians are given
+// as 3D Gaussians: log scales, opacities as logits, colour as SH degree 0 (DC); opacities
+// within 1e-7 of 0 or 1 are clamped there, and a negative language opacity becomes the logit
+// of 1e-7. Their number depends on the view: at most `DlgsInfo.n_gaussians`; a smaller
+// `capacity` that cannot hold this frame fails with `DLGS_STATUS_BUFFER_TOO_SMALL` and
+// `*written` (may be NULL) set to the count needed. Language is evaluated when `lang` or
+// `lang_opacity` is set. For a 3DGS file this is `dlgs_decode_frame(d, t,
+// view->camera_center, buffers, written)`.
+//
+// # Safety
+// `d` is NULL or an open decoder not used by another thread during the call; `view` is NULL or a readable DlgsView; `buffers` is NULL or a DlgsFrameBuffers whose non-NULL pointers hold `capacity` Gaussians of their attribute; `written` is NULL or writable storage for one uint32_t.
+enum DlgsStatus dlgs_decode_frame_view(struct DlgsDecoder *d,
+                                       double t,
+                                       const struct DlgsView *view,
+                                       const struct DlgsFrameBuffers *buffers,
+                                       uint32_t *written);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -104,8 +104,11 @@ pub unsafe extern "C" fn dlgs_set_hevc_decoder(
                 "decoder and decode must not be NULL",
             );
         };
-        d.inner
-            .set_key_picture_decoder(Arc::new(Callback { f, user }));
+        let cb = Arc::new(Callback { f, user });
+        match &mut d.inner {
+            crate::Inner::Gs(dec) => dec.set_key_picture_decoder(cb),
+            crate::Inner::Scaffold(dec, _) => dec.set_key_picture_decoder(cb),
+        }
         DlgsStatus::Ok
     })
 }

@@ -1,5 +1,6 @@
 //! C ABI of the dlgs decoder: open a `.dlgs` stream from a path or from memory, read its
-//! description, decode the Gaussians of any time t into caller-owned buffers, close.
+//! description, decode the Gaussians of any time t into caller-owned buffers, close. Scaffold-GS
+//! files (variant 1) decode per camera with `dlgs_decode_frame_view` (module `view`).
 //! The header `include/dlgs.h` is generated from this file by cbindgen.
 //!
 //! Conventions: every function returns a [`DlgsStatus`]; on failure the message of the last
@@ -10,14 +11,18 @@
 use std::cell::RefCell;
 use std::ffi::{c_char, CStr, CString};
 use std::fs::File;
-use std::io::{BufReader, Cursor, Read, Seek};
+use std::io::{BufReader, Cursor, Read, Seek, SeekFrom};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+use dlgs::container::header::Variant;
 use dlgs::model::Gaussians;
+use dlgs_decoder::scaffold::ScaffoldDecoder;
 use dlgs_decoder::{Decoder, FrameOptions};
 
 mod hevc;
+mod view;
 pub use hevc::{dlgs_set_hevc_decoder, DlgsHevcDecodeFn};
+pub use view::{dlgs_decode_frame_view, DlgsView};
 
 /// Result of every call.
 #[repr(C)]
@@ -39,6 +44,11 @@ pub enum DlgsStatus {
     /// The stream's time features are HEVC and this library has no HEVC decoder (built
     /// without FFmpeg): set one with `dlgs_set_hevc_decoder`.
     NoHevcDecoder = 7,
+    /// The call does not apply to the file's variant: a Scaffold-GS file (variant 1) generates
+    /// its Gaussians per camera, decode it with `dlgs_decode_frame_view`.
+    WrongVariant = 8,
+    /// A bad argument (e.g. a camera with a zero size or a non-finite value).
+    BadArgument = 9,
 }
 
 /// What a stream holds. Counts are per frame and the same for every frame.
@@ -62,6 +72,11 @@ pub struct DlgsInfo {
     pub sh_coeffs: u32,
     /// Language feature width per Gaussian (0 = no language; DLGStream: 9 = 3 levels x 3).
     pub lang_width: u32,
+    /// 0: 3D Gaussians (`dlgs_decode_frame`); 1: Scaffold-GS anchors, whose Gaussians are
+    /// generated per camera (`dlgs_decode_frame_view`). For variant 1, `n_static` and
+    /// `n_dynamic` count anchors and `n_gaussians` is the most Gaussians a frame can have
+    /// (10 per anchor): a frame has as many as the camera makes visible.
+    pub variant: u32,
 }
 
 /// Caller-owned output buffers for one frame, `capacity` Gaussians each. Any pointer may be
@@ -92,9 +107,25 @@ pub struct DlgsFrameBuffers {
 
 /// An open stream. Opaque to C.
 pub struct DlgsDecoder {
-    inner: Decoder<Box<dyn Source>>,
+    inner: Inner,
     /// The previous frame's dynamic set, reused so playback allocates nothing per frame.
     reuse: Option<Gaussians>,
+}
+
+/// The decoder of the file's variant.
+enum Inner {
+    Gs(Box<Decoder<Box<dyn Source>>>),
+    /// With the file's format version (the Scaffold-GS decoder does not expose its reader).
+    Scaffold(Box<ScaffoldDecoder<Box<dyn Source>>>, (u16, u16)),
+}
+
+impl Inner {
+    fn scene(&self) -> &dlgs::container::SceneHeader {
+        match self {
+            Inner::Gs(d) => d.scene(),
+            Inner::Scaffold(d, _) => d.scene(),
+        }
+    }
 }
 
 trait Source: Read + Seek + Send {}
@@ -138,8 +169,22 @@ fn guarded(f: impl FnOnce() -> DlgsStatus) -> DlgsStatus {
     }
 }
 
+/// The decoder for the variant `src` holds.
+fn open_inner(mut src: Box<dyn Source>) -> dlgs::Result<Inner> {
+    let limits = dlgs::Limits::default();
+    let r = dlgs::container::FileReader::open_with_limits(&mut src, limits.clone())?;
+    let (variant, version) = (r.scene().variant, r.version());
+    drop(r);
+    src.seek(SeekFrom::Start(0))
+        .map_err(|e| dlgs::Error::io("rewinding the stream", e, 0))?;
+    Ok(match variant {
+        Variant::Scaffold => Inner::Scaffold(Box::new(ScaffoldDecoder::new(src, limits)?), version),
+        _ => Inner::Gs(Box::new(Decoder::new(src, limits)?)),
+    })
+}
+
 fn open(src: Box<dyn Source>, out: *mut *mut DlgsDecoder) -> DlgsStatus {
-    match Decoder::new(src, dlgs::Limits::default()) {
+    match open_inner(src) {
         Ok(inner) => {
             let d = Box::new(DlgsDecoder { inner, reuse: None });
             // SAFETY: `out` was checked non-NULL by the caller of `open`, and the C contract
@@ -219,8 +264,17 @@ pub unsafe extern "C" fn dlgs_info(d: *mut DlgsDecoder, out: *mut DlgsInfo) -> D
         if out.is_null() {
             return fail(DlgsStatus::NullArgument, "out must not be NULL");
         }
-        let (major, minor) = d.inner.reader().version();
+        let (major, minor) = match &mut d.inner {
+            Inner::Gs(g) => g.reader().version(),
+            Inner::Scaffold(_, v) => *v,
+        };
         let s = d.inner.scene();
+        let scaffold = s.variant == Variant::Scaffold;
+        let n_gaussians = if scaffold {
+            (s.n_static + s.n_dynamic).saturating_mul(dlgs::model::scaffold::N_OFFSETS as u32)
+        } else {
+            s.n_static + s.n_dynamic
+        };
         let info = DlgsInfo {
             version_major: major,
             version_minor: minor,
@@ -231,10 +285,11 @@ pub unsafe extern "C" fn dlgs_info(d: *mut DlgsDecoder, out: *mut DlgsInfo) -> D
             duration: s.duration_seconds(),
             n_static: s.n_static,
             n_dynamic: s.n_dynamic,
-            n_gaussians: s.n_static + s.n_dynamic,
+            n_gaussians,
             sh_degree: s.sh_degree as u32,
             sh_coeffs: dlgs::model::sh_coeffs(s.sh_degree) as u32,
             lang_width: s.lang_width() as u32,
+            variant: u32::from(scaffold),
         };
         // SAFETY: non-NULL; the C contract is writable storage for one DlgsInfo.
         unsafe { *out = info };
@@ -283,7 +338,27 @@ pub unsafe extern "C" fn dlgs_decode_frame(
                 .try_into()
                 .expect("three floats")
         };
-        let scene = d.inner.scene();
+        decode_gs(d, t, centre, b, written)
+    })
+}
+
+/// `dlgs_decode_frame` of a 3DGS file (also `dlgs_decode_frame_view`'s).
+fn decode_gs(
+    d: &mut DlgsDecoder,
+    t: f64,
+    centre: [f32; 3],
+    b: &DlgsFrameBuffers,
+    written: *mut u32,
+) -> DlgsStatus {
+    {
+        let Inner::Gs(dec) = &mut d.inner else {
+            return fail(
+                DlgsStatus::WrongVariant,
+                "a Scaffold-GS file (variant 1): its Gaussians are generated per camera; \
+                 decode them with dlgs_decode_frame_view",
+            );
+        };
+        let scene = dec.scene();
         let n = (scene.n_static + scene.n_dynamic) as usize;
         if b.capacity < n {
             return fail(
@@ -303,36 +378,44 @@ pub unsafe extern "C" fn dlgs_decode_frame(
             language: has_lang && !(b.lang.is_null() && b.lang_opacity.is_null()),
         };
         let reuse = d.reuse.take().unwrap_or_default();
-        let frame = match d.inner.frame_at_reusing(t, &opts, reuse) {
+        let frame = match dec.frame_at_reusing(t, &opts, reuse) {
             Ok(f) => f,
             Err(e) => return format_error(e),
         };
         let (st, dy) = (frame.statics(), &frame.dynamics);
-        for (part, at) in [(st, 0usize), (dy, st.len())] {
-            let offset = |w: usize, p: *mut f32| {
-                if p.is_null() {
-                    p
-                } else {
-                    p.wrapping_add(at * w)
-                }
-            };
-            put(offset(3, b.positions), part.positions.as_flattened());
-            put(offset(3, b.log_scales), part.log_scales.as_flattened());
-            put(offset(4, b.rotations), part.rotations.as_flattened());
-            put(offset(1, b.opacity), &part.opacity);
-            put(offset(part.sh_stride(), b.sh), &part.sh);
-            if has_lang {
-                put(offset(1, b.lang_opacity), &part.lang_opacity);
-                put(offset(part.lang_width, b.lang), &part.lang);
-            }
-        }
+        write_part(b, st, 0, has_lang);
+        write_part(b, dy, st.len(), has_lang);
         d.reuse = Some(frame.dynamics);
-        if !written.is_null() {
-            // SAFETY: non-NULL; the C contract is writable storage for one u32.
-            unsafe { *written = n as u32 };
-        }
+        set_written(written, n);
         DlgsStatus::Ok
-    })
+    }
+}
+
+/// Copy `part` into rows `at..` of the caller's buffers (the NULL ones skipped).
+fn write_part(b: &DlgsFrameBuffers, part: &Gaussians, at: usize, has_lang: bool) {
+    let offset = |w: usize, p: *mut f32| {
+        if p.is_null() {
+            p
+        } else {
+            p.wrapping_add(at * w)
+        }
+    };
+    put(offset(3, b.positions), part.positions.as_flattened());
+    put(offset(3, b.log_scales), part.log_scales.as_flattened());
+    put(offset(4, b.rotations), part.rotations.as_flattened());
+    put(offset(1, b.opacity), &part.opacity);
+    put(offset(part.sh_stride(), b.sh), &part.sh);
+    if has_lang {
+        put(offset(1, b.lang_opacity), &part.lang_opacity);
+        put(offset(part.lang_width, b.lang), &part.lang);
+    }
+}
+
+fn set_written(written: *mut u32, n: usize) {
+    if !written.is_null() {
+        // SAFETY: non-NULL; the C contract is writable storage for one u32.
+        unsafe { *written = n as u32 };
+    }
 }
 
 /// The message of the last failed call on this thread ("" if none). Valid until the next
@@ -355,6 +438,8 @@ pub extern "C" fn dlgs_status_name(status: i32) -> *const c_char {
         5 => c"DLGS_STATUS_BUFFER_TOO_SMALL",
         6 => c"DLGS_STATUS_PANIC",
         7 => c"DLGS_STATUS_NO_HEVC_DECODER",
+        8 => c"DLGS_STATUS_WRONG_VARIANT",
+        9 => c"DLGS_STATUS_BAD_ARGUMENT",
         _ => c"unknown status",
     };
     s.as_ptr()

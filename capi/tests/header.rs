@@ -27,6 +27,8 @@ fn header_is_what_cbindgen_generates() {
         "dlgs_open_memory",
         "dlgs_info",
         "dlgs_decode_frame",
+        "dlgs_decode_frame_view",
+        "DlgsView",
         "dlgs_last_error",
         "dlgs_close",
     ] {

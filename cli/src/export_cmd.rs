@@ -1,5 +1,6 @@
 //! `dlgs export` / `dlgs decode`: decoded frames as files other players read: INRIA PLY (plain,
-//! or with the DLGStream extras) or Niantic SPZ (v3 by default), one frame or a sequence.
+//! or with the DLGStream extras), Niantic SPZ (v3 by default) or PlayCanvas SOG (a bundled
+//! `.sog`), one frame or a sequence.
 
 use std::path::{Path, PathBuf};
 
@@ -25,7 +26,7 @@ pub struct ExportArgs {
     /// Resample the sequence at this rate (frames between the file's frames are interpolated).
     #[arg(long, requires = "frames")]
     pub fps: Option<f64>,
-    /// `ply` (INRIA 3DGS layout) or `spz`.
+    /// `ply` (INRIA 3DGS layout), `spz` or `sog` (PlayCanvas SOG v2, bundled `.sog`).
     #[arg(long, default_value = "ply")]
     pub format: String,
     /// SPZ version to write: 3 (smallest-three rotations, current players) or 2 (older players).
@@ -44,6 +45,7 @@ pub struct ExportArgs {
 enum Format {
     Ply { extras: bool },
     Spz(SpzVersion),
+    Sog,
 }
 
 impl Format {
@@ -60,13 +62,20 @@ impl Format {
                     v => bail!("--spz-version {v}: 2 or 3"),
                 })
             }
-            f => bail!("--format {f}: ply or spz"),
+            "sog" => {
+                if a.extras {
+                    bail!("--extras is for PLY: SOG has no place for language features");
+                }
+                Format::Sog
+            }
+            f => bail!("--format {f}: ply, spz or sog"),
         })
     }
     fn ext(&self) -> &'static str {
         match self {
             Format::Ply { .. } => "ply",
             Format::Spz(_) => "spz",
+            Format::Sog => "sog",
         }
     }
     fn encode(&self, g: &Gaussians) -> Result<Vec<u8>> {
@@ -74,6 +83,7 @@ impl Format {
             Format::Ply { extras: true } => dlgs::interop::ply::write_ply(g)?,
             Format::Ply { extras: false } => dlgs::interop::ply::write_ply(&g.without_language())?,
             Format::Spz(v) => write_spz(g, *v)?,
+            Format::Sog => dlgs::interop::sog_write::write_sog(&g.without_language())?,
         })
     }
 }

@@ -9,6 +9,7 @@ mod info;
 mod ingest_cmd;
 mod pending_file;
 mod play_cmd;
+mod play_scaffold;
 mod query_cmd;
 mod rd_cmd;
 mod rd_plot;

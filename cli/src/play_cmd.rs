@@ -28,7 +28,8 @@ pub struct PlayArgs {
     /// Decode every frame as fast as possible (no clock, no drops): the sustained decode rate.
     #[arg(long)]
     pub max_speed: bool,
-    /// Also evaluate the language decoders of dynamic Gaussians.
+    /// Also evaluate the language decoders of dynamic Gaussians (Scaffold-GS: the language
+    /// MLP of every neural Gaussian).
     #[arg(long)]
     pub language: bool,
     #[arg(long)]
@@ -37,6 +38,15 @@ pub struct PlayArgs {
     /// core for the frames on a 2-core machine: docs/benchmarks/play.md has the drops for 1 and 2.
     #[arg(long, default_value_t = 1)]
     pub gop_threads: usize,
+    /// Scaffold-GS files (whose Gaussians are generated per camera): frame f is decoded for
+    /// camera f mod the cameras given (`--view` for one fixed camera; default: the orbit
+    /// `dlgs render` uses). 3DGS files ignore these options.
+    #[command(flatten)]
+    pub cams: crate::cameras_arg::CameraArgs,
+    /// Scaffold-GS files: decode every anchor, not only those whose Gaussians can reach into
+    /// the camera's view.
+    #[arg(long)]
+    pub no_cull: bool,
 }
 
 /// A `Read` that delivers at most `bytes_per_s`, sleeping as a slow link would.
@@ -86,25 +96,32 @@ fn open_source(args: &PlayArgs) -> Result<Box<dyn Read + Send>> {
 }
 
 #[derive(Default, serde::Serialize)]
-struct PlayReport {
-    frames: u32,
-    shown: u32,
-    dropped: u32,
-    fps: f64,
-    time_to_first_frame_ms: f64,
-    wall_s: f64,
-    frame_decode_ms_mean: f64,
-    frame_decode_ms_p95: f64,
-    frame_decode_ms_max: f64,
-    gop_decode_ms: Vec<f64>,
+pub(crate) struct PlayReport {
+    pub frames: u32,
+    pub shown: u32,
+    pub dropped: u32,
+    pub fps: f64,
+    pub time_to_first_frame_ms: f64,
+    pub wall_s: f64,
+    pub frame_decode_ms_mean: f64,
+    pub frame_decode_ms_p95: f64,
+    pub frame_decode_ms_max: f64,
+    pub gop_decode_ms: Vec<f64>,
     /// Bytes arriving + decoding, per GOP.
-    gop_ready_ms: Vec<f64>,
+    pub gop_ready_ms: Vec<f64>,
     /// Time the player waited for a GOP that had not arrived yet.
-    stall_ms: f64,
-    sustained_decode_fps: f64,
+    pub stall_ms: f64,
+    pub sustained_decode_fps: f64,
+    /// Scaffold-GS files: Gaussians generated per frame (mean), for the cameras played.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gaussians_mean: Option<f64>,
 }
 
 pub fn run_play(args: &PlayArgs) -> Result<()> {
+    // A file that cannot be read as .dlgs here fails below with the stream reader's error.
+    if args.file.as_os_str() != "-" && crate::scene_io::is_scaffold(&args.file).unwrap_or(false) {
+        return crate::play_scaffold::run(args);
+    }
     let opened = Instant::now();
     let src = open_source(args)?;
     let (tx, rx) = sync_channel::<GopMsg>(1);
@@ -194,7 +211,7 @@ fn play_loop(
     };
     let mut gop: Option<Arc<DecodedGop>> = None;
     let mut buffer = Gaussians::default();
-    let mut decode_ms = Vec::new();
+    let mut decode_ms: Vec<f64> = Vec::new();
     let mut clock_start: Option<Instant> = None;
     let bar = indicatif::ProgressBar::new(frames as u64);
     bar.set_style(
@@ -252,22 +269,30 @@ fn play_loop(
     }
     bar.finish_and_clear();
     r.wall_s = clock_start.map_or(0.0, |s| s.elapsed().as_secs_f64());
-    if !decode_ms.is_empty() {
-        let n = decode_ms.len() as f64;
-        let frames_ms = decode_ms.iter().sum::<f64>();
-        r.frame_decode_ms_mean = frames_ms / n;
-        decode_ms.sort_by(f64::total_cmp);
-        r.frame_decode_ms_p95 = decode_ms[((n * 0.95) as usize).min(decode_ms.len() - 1)];
-        r.frame_decode_ms_max = *decode_ms.last().expect("non-empty");
-        // GOP decoding runs on the reader thread, in parallel with frame decoding; the
-        // sustained rate counts both, as if they shared one thread.
-        let total_ms = frames_ms + r.gop_decode_ms.iter().sum::<f64>();
-        r.sustained_decode_fps = n / (total_ms / 1e3);
-    }
+    r.summarise(decode_ms);
     Ok(r)
 }
 
-fn print_report(r: &PlayReport, json: bool) -> Result<()> {
+impl PlayReport {
+    /// Frame decode statistics from the per-frame times.
+    pub(crate) fn summarise(&mut self, mut decode_ms: Vec<f64>) {
+        if decode_ms.is_empty() {
+            return;
+        }
+        let n = decode_ms.len() as f64;
+        let frames_ms = decode_ms.iter().sum::<f64>();
+        self.frame_decode_ms_mean = frames_ms / n;
+        decode_ms.sort_by(f64::total_cmp);
+        self.frame_decode_ms_p95 = decode_ms[((n * 0.95) as usize).min(decode_ms.len() - 1)];
+        self.frame_decode_ms_max = *decode_ms.last().expect("non-empty");
+        // GOP decoding runs on the reader thread, in parallel with frame decoding; the
+        // sustained rate counts both, as if they shared one thread.
+        let total_ms = frames_ms + self.gop_decode_ms.iter().sum::<f64>();
+        self.sustained_decode_fps = n / (total_ms / 1e3);
+    }
+}
+
+pub(crate) fn print_report(r: &PlayReport, json: bool) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string_pretty(r)?);
         return Ok(());
@@ -287,12 +312,20 @@ fn print_report(r: &PlayReport, json: bool) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    println!(
-        "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
-        list(&r.gop_decode_ms),
-        list(&r.gop_ready_ms)
-    );
+    if r.gaussians_mean.is_some() {
+        // Scaffold-GS: GOPs are decoded on the player's thread, from the file.
+        println!("GOP decode (player thread): {} ms", list(&r.gop_decode_ms));
+    } else {
+        println!(
+            "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
+            list(&r.gop_decode_ms),
+            list(&r.gop_ready_ms)
+        );
+    }
     println!("player stalled {:.1} ms waiting for GOPs", r.stall_ms);
+    if let Some(n) = r.gaussians_mean {
+        println!("Scaffold-GS: {n:.0} neural Gaussians per frame (mean)");
+    }
     println!(
         "sustained decode rate (frames + GOPs on one thread): {:.1} frames/s",
         r.sustained_decode_fps

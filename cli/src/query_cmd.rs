@@ -159,7 +159,9 @@ pub fn run_query(a: &QueryArgs) -> Result<()> {
     let mut report = Vec::new();
     for (ci, cam) in cameras.iter().enumerate() {
         let t0 = Instant::now();
-        let g = src.at(a.t, cam.position.to_array(), true)?;
+        // Scaffold-GS files: the neural Gaussians of this camera with their language, only
+        // the anchors in view (the same image as every anchor).
+        let g = src.at_camera(a.t, cam, true, true)?;
         let decode_ms = ms(t0);
         if !g.has_language() {
             bail!("{} has no language features", a.file.display());

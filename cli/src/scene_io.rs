@@ -24,7 +24,7 @@ pub enum Source {
 }
 
 /// Whether a `.dlgs` file is of the Scaffold-GS variant (`HEAD.variant = 1`).
-fn is_scaffold(path: &Path) -> Result<bool> {
+pub fn is_scaffold(path: &Path) -> Result<bool> {
     let f = File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let r = dlgs::container::FileReader::open(BufReader::new(f))
         .with_context(|| format!("opening {}", path.display()))?;

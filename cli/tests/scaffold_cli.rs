@@ -79,3 +79,182 @@ fn image_pixels(png: &[u8]) -> Vec<u8> {
     let img = image::load_from_memory(png).unwrap().to_rgb8();
     img.into_raw()
 }
+
+/// The fixture encoded once per test (each test has its own directory).
+fn encoded(dir: &std::path::Path) -> PathBuf {
+    let out = dir.join("hac.dlgs");
+    let o = run(&[
+        "encode",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    out
+}
+
+fn json_of(o: &std::process::Output) -> serde_json::Value {
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn play_decodes_every_frame_for_the_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = encoded(dir.path());
+    let mut means = Vec::new();
+    for cull in [true, false] {
+        let mut args = vec![
+            "play",
+            file.to_str().unwrap(),
+            "--max-speed",
+            "--json",
+            "--view",
+            "0",
+            "--distance",
+            "0.3",
+        ];
+        if !cull {
+            args.push("--no-cull");
+        }
+        let r = json_of(&run(&args));
+        assert_eq!(
+            (r["frames"].as_u64(), r["shown"].as_u64()),
+            (Some(120), Some(120))
+        );
+        assert_eq!(r["dropped"].as_u64(), Some(0));
+        assert_eq!(r["gop_decode_ms"].as_array().unwrap().len(), 2);
+        let mean = r["gaussians_mean"].as_f64().unwrap();
+        // 2,400 anchors of 10 children each at most.
+        assert!(mean > 10.0 && mean <= 24_000.0, "{mean}");
+        means.push(mean);
+    }
+    // Orbit camera 0 placed inside the scene sees a small part of it: culling decodes the
+    // children of far fewer anchors.
+    assert!(means[0] < 0.5 * means[1] && means[1] > 1000.0, "{means:?}");
+    // A throttled Scaffold-GS file is refused with the reason (no streaming reader for it).
+    let o = run(&["play", file.to_str().unwrap(), "--bandwidth-mbps", "10"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("random access"));
+}
+
+#[test]
+fn query_reads_the_neural_gaussians_language() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let file = encoded(d);
+    let data = dlgs_tests::data("ply");
+    let labels = d.join("labels");
+    let o = run(&[
+        "labels",
+        data.join("supersplat_fruit_drops_minimal_4721_sh3.ply")
+            .to_str()
+            .unwrap(),
+        "--annotations",
+        data.join("supersplat_fruit_drops_minimal.annotations.json")
+            .to_str()
+            .unwrap(),
+        "-o",
+        labels.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The orbit `dlgs export` evaluates the view-dependent MLPs from (its camera 0), placed
+    // around the anchors at t = 0 as `dlgs cameras` places it.
+    let cams = d.join("cams.json");
+    let o = run(&[
+        "cameras",
+        file.to_str().unwrap(),
+        "-o",
+        cams.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let ply = d.join("frame.ply");
+    let o = run(&[
+        "export",
+        file.to_str().unwrap(),
+        "--t",
+        "0",
+        "--extras",
+        "-o",
+        ply.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Query the Scaffold-GS file and the exported frame (the same Gaussians, language
+    // included) from camera 0: the same answer, pixel for pixel.
+    let mut answers = Vec::new();
+    for (scene, tag) in [(&file, "scaffold"), (&ply, "ply")] {
+        let prefix = d.join(tag);
+        let r = json_of(&run(&[
+            "query",
+            scene.to_str().unwrap(),
+            "--t",
+            "0",
+            "--cameras",
+            cams.to_str().unwrap(),
+            "--view",
+            "0",
+            "--width",
+            "400",
+            "--lang-decoder",
+            labels.join("lang_decoder.safetensors").to_str().unwrap(),
+            "--negatives",
+            labels.join("negatives.npy").to_str().unwrap(),
+            "--text-embedding",
+            labels.join("category_1.npy").to_str().unwrap(),
+            "-o",
+            prefix.to_str().unwrap(),
+            "--json",
+        ]));
+        let mask = std::fs::read(d.join(format!("{tag}.mask.png"))).unwrap();
+        answers.push((
+            r[0]["scores"].clone(),
+            r[0]["selected_pixels"].clone(),
+            mask,
+        ));
+    }
+    assert_eq!(answers[0], answers[1]);
+    let scores: Vec<f64> = serde_json::from_value(answers[0].0.clone()).unwrap();
+    assert_eq!(scores.len(), 3);
+    // The language image is not constant: the levels score differently.
+    assert!(
+        scores.iter().any(|s| (s - scores[0]).abs() > 1e-3),
+        "{scores:?}"
+    );
+}
+
+#[test]
+fn export_writes_sog_that_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = encoded(dir.path());
+    let (ply, sog) = (dir.path().join("f.ply"), dir.path().join("f.sog"));
+    for (out, format) in [(&ply, "ply"), (&sog, "sog")] {
+        let o = run(&[
+            "export",
+            file.to_str().unwrap(),
+            "--t",
+            "1.0",
+            "--format",
+            format,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let a = dlgs::interop::read_splat_file(&ply).unwrap();
+    let b = dlgs::interop::read_splat_file(&sog).unwrap();
+    assert_eq!((a.len(), b.len()), (a.len(), a.len()));
+    assert!(a.len() > 1000);
+    // Positions within SOG's 16-bit log-domain quantisation.
+    let worst = a
+        .positions
+        .iter()
+        .zip(&b.positions)
+        .flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs() / (1.0 + p[k].abs())))
+        .fold(0f32, f32::max);
+    assert!(worst < 1e-3, "{worst}");
+}

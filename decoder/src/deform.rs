@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use dlgs::container::header::DeformModel;
 use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
-use dlgs::Result;
+use dlgs::{Error, Result};
 use rayon::prelude::*;
 
 use crate::interp::{hermite, normalize4, slerp_angle, slerp_blend};
@@ -95,6 +95,18 @@ fn panels(rows: Range<usize>) -> impl Iterator<Item = Range<usize>> {
 }
 
 /// The output rows of one block, written in place.
+/// Caller-owned output rows of one frame's dynamic set (see
+/// [`Deformer::frame_into_slices`]).
+pub struct FrameSlices<'a> {
+    pub positions: &'a mut [[f32; 3]],
+    pub log_scales: &'a mut [[f32; 3]],
+    pub rotations: &'a mut [[f32; 4]],
+    pub opacity: &'a mut [f32],
+    pub lang_opacity: &'a mut [f32],
+    pub sh: &'a mut [f32],
+    pub lang: &'a mut [f32],
+}
+
 struct BlockOut<'a> {
     rows: Range<usize>,
     pos: &'a mut [[f32; 3]],
@@ -265,30 +277,96 @@ impl Deformer {
         opts: &FrameOptions,
         out: &mut Gaussians,
     ) -> Result<()> {
-        // The two keys the frame interpolates (decoded now if the features are per key).
-        self.features.ensure_keys(key..key + 2)?;
-        let n = self.features().n;
-        let language = opts.language && self.lang.is_some() && canon.has_language();
+        self.frame_into_after(canon, key, delta, opts, out, 0)
+    }
+
+    /// Like [`Self::frame_into`], writing the dynamic Gaussians as rows `first..` of `out`
+    /// and leaving its first `first` rows as they are (e.g. the static set: the merged
+    /// frame is then built without copying the dynamic set). `out` must have `first` rows with
+    /// `canon`'s SH degree and language width.
+    pub fn frame_into_after(
+        &self,
+        canon: &Gaussians,
+        key: usize,
+        delta: f32,
+        opts: &FrameOptions,
+        out: &mut Gaussians,
+        first: usize,
+    ) -> Result<()> {
+        if first > 0
+            && (out.len() < first
+                || out.sh_degree != canon.sh_degree
+                || out.lang_width != canon.lang_width)
+        {
+            return Err(Error::request(
+                "frame_into_after: the first rows differ from the dynamic set in layout",
+            ));
+        }
+        let n = canon.len();
         out.sh_degree = canon.sh_degree;
         out.lang_width = canon.lang_width;
-        out.positions.resize(n, [0.0; 3]);
-        out.log_scales.resize(n, [0.0; 3]);
-        out.rotations.resize(n, [0.0; 4]);
-        out.opacity.resize(n, 0.0);
-        out.lang_opacity.resize(canon.lang_opacity.len(), 0.0);
-        out.sh.resize(canon.sh.len(), 0.0);
-        out.lang.resize(canon.lang.len(), 0.0);
-        let blocks = block_ranges(n);
         let stride = canon.sh_stride();
         let lw = canon.lang_width;
         let lo = usize::from(canon.has_language());
-        let mut pos = split_rows(&mut out.positions, 1, &blocks).into_iter();
-        let mut scale = split_rows(&mut out.log_scales, 1, &blocks).into_iter();
-        let mut rot = split_rows(&mut out.rotations, 1, &blocks).into_iter();
-        let mut opacity = split_rows(&mut out.opacity, 1, &blocks).into_iter();
-        let mut lang_opacity = split_rows(&mut out.lang_opacity, lo, &blocks).into_iter();
-        let mut sh = split_rows(&mut out.sh, stride, &blocks).into_iter();
-        let mut lang = split_rows(&mut out.lang, lw, &blocks).into_iter();
+        out.positions.resize(first + n, [0.0; 3]);
+        out.log_scales.resize(first + n, [0.0; 3]);
+        out.rotations.resize(first + n, [0.0; 4]);
+        out.opacity.resize(first + n, 0.0);
+        out.lang_opacity
+            .resize(first * lo + canon.lang_opacity.len(), 0.0);
+        out.sh.resize(first * stride + canon.sh.len(), 0.0);
+        out.lang.resize(first * lw + canon.lang.len(), 0.0);
+        let slices = FrameSlices {
+            positions: &mut out.positions[first..],
+            log_scales: &mut out.log_scales[first..],
+            rotations: &mut out.rotations[first..],
+            opacity: &mut out.opacity[first..],
+            lang_opacity: &mut out.lang_opacity[first * lo..],
+            sh: &mut out.sh[first * stride..],
+            lang: &mut out.lang[first * lw..],
+        };
+        self.frame_into_slices(canon, key, delta, opts, slices)
+    }
+
+    /// The dynamic Gaussians at key pair (`key`, `key + 1`) and fraction `delta`, written into
+    /// caller-owned slices of exactly the dynamic set's size (`canon`'s layout; the language
+    /// slices empty when `canon` has no language), e.g. memory a binding hands out.
+    pub fn frame_into_slices(
+        &self,
+        canon: &Gaussians,
+        key: usize,
+        delta: f32,
+        opts: &FrameOptions,
+        out: FrameSlices<'_>,
+    ) -> Result<()> {
+        // The two keys the frame interpolates (decoded now if the features are per key).
+        self.features.ensure_keys(key..key + 2)?;
+        let n = self.features().n;
+        let stride = canon.sh_stride();
+        let lw = canon.lang_width;
+        let lo = usize::from(canon.has_language());
+        if n != canon.len()
+            || out.positions.len() != n
+            || out.log_scales.len() != n
+            || out.rotations.len() != n
+            || out.opacity.len() != n
+            || out.lang_opacity.len() != n * lo
+            || out.sh.len() != n * stride
+            || out.lang.len() != n * lw
+        {
+            return Err(Error::request(
+                "frame_into_slices: the slices do not hold the dynamic set",
+            ));
+        }
+        let language = opts.language && self.lang.is_some() && canon.has_language();
+        let blocks = block_ranges(n);
+        let mut pos = split_rows(out.positions, 1, &blocks).into_iter();
+        let mut scale = split_rows(out.log_scales, 1, &blocks).into_iter();
+        let mut rot = split_rows(out.rotations, 1, &blocks).into_iter();
+        let mut opacity = split_rows(out.opacity, 1, &blocks).into_iter();
+        let mut lang_opacity = split_rows(out.lang_opacity, lo, &blocks).into_iter();
+        let mut sh = split_rows(out.sh, stride, &blocks).into_iter();
+        let mut lang = split_rows(out.lang, lw, &blocks).into_iter();
         let jobs: Vec<BlockOut> = blocks
             .iter()
             .map(|rows| BlockOut {

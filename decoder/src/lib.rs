@@ -26,7 +26,7 @@ use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
 use dlgs::{Canonical, Error, FormatErrorKind, Limits, Result};
 
-pub use deform::{Deformer, FrameOptions};
+pub use deform::{Deformer, FrameOptions, FrameSlices};
 pub use hevc::{KeyPictureDecoder, SharedKeyPictureDecoder};
 use lru::GopLru;
 
@@ -316,5 +316,167 @@ impl<R: Read + Seek> Decoder<R> {
         let time = self.scene().locate(t)?;
         let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
         DecodedGop::frame(&gop, time, opts, reuse)
+    }
+
+    /// The Gaussians at `t` as [`Frame::merged`] gives them (static then dynamic), built
+    /// with one copy of the static set: the dynamic set is decoded straight into its rows of
+    /// the merged buffers (new, exact-size allocations the caller owns).
+    pub fn frame_at_merged(&mut self, t: f64, opts: &FrameOptions) -> Result<Gaussians> {
+        let time = self.scene().locate(t)?;
+        let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        let (statics, canon) = (&gop.canonical.statics, &gop.canonical.dynamics);
+        let same_layout =
+            statics.sh_degree == canon.sh_degree && statics.lang_width == canon.lang_width;
+        match &gop.deformer {
+            Some(d) if same_layout => {
+                let mut out = with_room(statics, canon.len());
+                d.frame_into_after(canon, time.key, time.delta, opts, &mut out, statics.len())?;
+                Ok(out)
+            }
+            _ => Ok(DecodedGop::frame(&gop, time, opts, Gaussians::default())?.merged()),
+        }
+    }
+}
+
+impl<R: Read + Seek> Decoder<R> {
+    /// [`Self::frame_at_merged`] written into caller-owned slices that hold exactly the merged
+    /// frame (static then dynamic rows, the stream's layout; the language slices empty
+    /// when the stream has none): the static rows are copied, the dynamic rows decoded in
+    /// place. For bindings that decode into memory they hand out again.
+    pub fn frame_at_merged_into(
+        &mut self,
+        t: f64,
+        opts: &FrameOptions,
+        out: FrameSlices<'_>,
+    ) -> Result<()> {
+        let time = self.scene().locate(t)?;
+        let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        let (statics, canon) = (&gop.canonical.statics, &gop.canonical.dynamics);
+        let fits = |g: &Gaussians, extra: &Gaussians| {
+            let rows = g.len() + extra.len();
+            out.positions.len() == rows
+                && out.log_scales.len() == rows
+                && out.rotations.len() == rows
+                && out.opacity.len() == rows
+                && out.lang_opacity.len() == g.lang_opacity.len() + extra.lang_opacity.len()
+                && out.sh.len() == g.sh.len() + extra.sh.len()
+                && out.lang.len() == g.lang.len() + extra.lang.len()
+        };
+        let same_layout =
+            statics.sh_degree == canon.sh_degree && statics.lang_width == canon.lang_width;
+        let Some(d) = gop.deformer.as_ref().filter(|_| same_layout) else {
+            let g = DecodedGop::frame(&gop, time, opts, Gaussians::default())?.merged();
+            if !fits(&g, &Gaussians::default()) {
+                return Err(Error::request("the slices do not hold the merged frame"));
+            }
+            copy_rows(&g, out);
+            return Ok(());
+        };
+        if !fits(statics, canon) {
+            return Err(Error::request("the slices do not hold the merged frame"));
+        }
+        let ns = statics.len();
+        let (lo, stride, lw) = (
+            usize::from(statics.has_language()),
+            statics.sh_stride(),
+            statics.lang_width,
+        );
+        let (pos_s, pos_d) = out.positions.split_at_mut(ns);
+        let (sc_s, sc_d) = out.log_scales.split_at_mut(ns);
+        let (rot_s, rot_d) = out.rotations.split_at_mut(ns);
+        let (op_s, op_d) = out.opacity.split_at_mut(ns);
+        let (lop_s, lop_d) = out.lang_opacity.split_at_mut(ns * lo);
+        let (sh_s, sh_d) = out.sh.split_at_mut(ns * stride);
+        let (l_s, l_d) = out.lang.split_at_mut(ns * lw);
+        copy_rows(
+            statics,
+            FrameSlices {
+                positions: pos_s,
+                log_scales: sc_s,
+                rotations: rot_s,
+                opacity: op_s,
+                lang_opacity: lop_s,
+                sh: sh_s,
+                lang: l_s,
+            },
+        );
+        let dynamic = FrameSlices {
+            positions: pos_d,
+            log_scales: sc_d,
+            rotations: rot_d,
+            opacity: op_d,
+            lang_opacity: lop_d,
+            sh: sh_d,
+            lang: l_d,
+        };
+        d.frame_into_slices(canon, time.key, time.delta, opts, dynamic)
+    }
+}
+
+/// `g`'s rows into slices of exactly its size, the attributes in parallel.
+fn copy_rows(g: &Gaussians, out: FrameSlices<'_>) {
+    let FrameSlices {
+        positions,
+        log_scales,
+        rotations,
+        opacity,
+        lang_opacity,
+        sh,
+        lang,
+    } = out;
+    rayon::join(
+        || {
+            rayon::join(
+                || positions.copy_from_slice(&g.positions),
+                || log_scales.copy_from_slice(&g.log_scales),
+            );
+            rayon::join(
+                || rotations.copy_from_slice(&g.rotations),
+                || opacity.copy_from_slice(&g.opacity),
+            );
+        },
+        || {
+            rayon::join(
+                || sh.copy_from_slice(&g.sh),
+                || lang.copy_from_slice(&g.lang),
+            );
+            lang_opacity.copy_from_slice(&g.lang_opacity);
+        },
+    );
+}
+
+/// `g`'s rows in new buffers with room for `more` rows of the same layout. The attributes are
+/// copied in parallel (the copy and the first touch of the new pages are what the merged
+/// frame costs over the dynamic set alone).
+fn with_room(g: &Gaussians, more: usize) -> Gaussians {
+    fn copy<T: Copy + Send + Sync>(v: &[T], extra: usize) -> Vec<T> {
+        let mut out = Vec::with_capacity(v.len() + extra);
+        out.extend_from_slice(v);
+        out
+    }
+    let lo = usize::from(g.has_language());
+    let ((positions, log_scales), (rotations, opacity)) = rayon::join(
+        || rayon::join(|| copy(&g.positions, more), || copy(&g.log_scales, more)),
+        || rayon::join(|| copy(&g.rotations, more), || copy(&g.opacity, more)),
+    );
+    let ((sh, lang), lang_opacity) = rayon::join(
+        || {
+            rayon::join(
+                || copy(&g.sh, more * g.sh_stride()),
+                || copy(&g.lang, more * g.lang_width),
+            )
+        },
+        || copy(&g.lang_opacity, more * lo),
+    );
+    Gaussians {
+        sh_degree: g.sh_degree,
+        lang_width: g.lang_width,
+        positions,
+        log_scales,
+        rotations,
+        opacity,
+        lang_opacity,
+        sh,
+        lang,
     }
 }

@@ -26,15 +26,19 @@ times = [gop_seconds * 0.95 * i / 30 for i in range(30)]
 r.frame(0.0)  # decode GOP 0 once
 
 
-def interleaved(language, split):
+def interleaved(language, split, keep=False):
     """Per t: the Rust call (timed inside Rust), then the Python call (timed here). Both
-    exclude freeing the frame (Rust drops it after its clock stops; here after ours)."""
-    rust, py = [], []
+    exclude freeing the frame (Rust drops it after its clock stops; here after ours). With
+    `keep` the last 3 frames stay referenced (so `frame` cannot decode into released arrays
+    and allocates new ones); otherwise each frame is released before the next call."""
+    rust, py, kept = [], [], []
     for t in times:
         rust += r.time_frame_at([t], language)
         t0 = time.perf_counter()
         res = r.frame(t, language=language, split=split)
         py.append(time.perf_counter() - t0)
+        if keep:
+            kept = kept[-2:] + [res]
         del res
     return rust, py
 
@@ -44,13 +48,15 @@ print(f"{path}: {info['n_static']} static + {info['n_dynamic']} dynamic, SH {inf
 print("| what | Rust frame_at | Python frame(t) | overhead |")
 print("|---|---|---|---|")
 for language in (False, True):
-    for split in (False, True):
+    for split, keep in ((False, False), (False, True), (True, False)):
         rust, py = [], []
         for _ in range(repeats):
-            a, b = interleaved(language, split)
+            a, b = interleaved(language, split, keep)
             rust += a
             py += b
         a, b = statistics.median(rust), statistics.median(py)
-        what = ("colour + language" if language else "colour") + (
-            ", split (static shared)" if split else ", merged (static + dynamic copied)")
+        what = ("colour" if language is False else "colour + language") + (
+            ", split (static shared)" if split else
+            ", merged, last 3 frames kept (new arrays)" if keep else
+            ", merged, each frame released (its arrays decoded into again)")
         print(f"| {what} | {a * 1e3:.2f} ms | {b * 1e3:.2f} ms | {100 * (b / a - 1):+.1f} % |")

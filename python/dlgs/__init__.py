@@ -71,10 +71,13 @@ def _residual_field(f: Optional[Mapping[str, Any]]) -> Optional[dict]:
     return out
 
 
-def write_scene(path: Union[str, os.PathLike], scene: Mapping[str, Any], spz_version: int = 3) -> int:
+def write_scene(path: Union[str, os.PathLike], scene: Mapping[str, Any], spz_version: int = 3,
+                format: Optional[str] = None) -> int:
     """Write ``scene`` (dict of arrays, as :func:`read_scene` returns) as INRIA PLY (``.ply``),
-    SPZ (``.spz``, v3 or v2) or antimatter15 ``.splat``. Returns the bytes written."""
-    return _dlgs.write_scene(path, _gaussians(scene), spz_version)
+    SPZ (``.spz``, v3 or v2), antimatter15 ``.splat`` or PlayCanvas SOG (``.sog``, or a path
+    named ``meta.json`` for the unbundled files). ``format`` (``"ply"``, ``"spz"``, ``"splat"``,
+    ``"sog"``) overrides the extension. Returns the bytes written."""
+    return _dlgs.write_scene(path, _gaussians(scene), spz_version, format)
 
 
 if HAS_HEVC:

@@ -50,14 +50,19 @@ class Reader:
     def __iter__(self) -> Iterator[Tuple[float, Frame]]:
         """(t, frame) for every frame."""
     def frame(self, t: float, camera: Optional[Camera] = None, language: bool = False,
-              split: bool = False) -> Union[Frame, Dict[str, Frame]]:
+              split: bool = False, cull: bool = False, neural: bool = False
+              ) -> Union[Frame, Dict[str, Frame]]:
         """The Gaussians at t seconds (between frames too): static then dynamic in one dict,
         or {"static": ..., "dynamic": ...} with split=True (static arrays shared and
         read-only within a GOP). camera: viewpoint of the view-dependent decoders (None:
-        the origin). language: evaluate the language decoder of dynamic Gaussians."""
+        the origin). language: evaluate the language decoder of dynamic Gaussians.
+        Scaffold-GS files (info["variant"] == "scaffold"): camera is required (ValueError
+        without it); cull: decode only the anchors in the camera's view; neural: the MLP
+        outputs (scales, colors RGB, tanh opacities, anchor, offset) instead of the 3DGS
+        form (SH DC, log-scales, opacity logits)."""
     def render(self, t: float, camera: Camera, width: Optional[int] = None,
                height: Optional[int] = None, features: bool = False,
-               background: Tuple[float, float, float] = (1.0, 1.0, 1.0)
+               background: Tuple[float, float, float] = (1.0, 1.0, 1.0), cull: bool = True
                ) -> Union[F32, Tuple[F32, F32]]:
         """HxWx3 linear colour (not clamped); with features=True also the HxWxL language
         feature image."""
@@ -78,6 +83,10 @@ class Reader:
         """The orbit `dlgs cameras` writes, as cameras.json entries."""
     def time_frame_at(self, times: Sequence[float], language: bool = False) -> List[float]:
         """Seconds of each Rust frame_at(t) (the baseline of the overhead benchmark)."""
+    def time_frame_span(self, times: Sequence[float], language: bool = False
+                        ) -> Tuple[float, float, List[float]]:
+        """As time_frame_at, plus the start and end of the call (seconds on a process-wide
+        clock, read with the GIL released)."""
 
 class FrameIter:
     def __iter__(self) -> "FrameIter": ...
@@ -107,7 +116,8 @@ def open(source: Union[PathLike, bytes, bytearray, memoryview],
     own worker threads (default: the process-wide pool, one per core)."""
 def read_scene(path: PathLike) -> Frame:
     """Read a PLY, .splat, SPZ or SOG (.sog / meta.json) scene."""
-def write_scene(path: PathLike, scene: Frame, spz_version: int = 3) -> int:
+def write_scene(path: PathLike, scene: Frame, spz_version: int = 3,
+                format: Optional[str] = None) -> int:
     """Write .ply (with language extras), .spz (v3 or v2) or .splat; returns the bytes."""
 def encode_scene(scene: Frame, path: PathLike, quality: str = "high", zstd_level: int = 9,
                  meta: Any = None) -> int:

@@ -16,8 +16,11 @@ mod ntc_dict;
 #[cfg(feature = "hevc")]
 mod ntc_input;
 mod reader;
+mod recycle;
+mod scaffold;
 mod scenes;
 mod splat_write;
+mod timing;
 mod view;
 #[cfg(feature = "hevc")]
 mod writer;

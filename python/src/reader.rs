@@ -4,14 +4,13 @@
 
 use std::fs::File;
 use std::io::{BufReader, Cursor, Read, Seek};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard};
 
 use dlgs::container::SceneHeader;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::Gaussians;
 use dlgs_decoder::{Decoder, FrameOptions};
 use dlgs_render::Camera;
-use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 
@@ -19,6 +18,8 @@ use crate::arrays::{gaussians_to_dict, owned_array, read_f32};
 use crate::camera;
 use crate::errors::{request, to_py, IntoPy, Res};
 use crate::gop_dict::gop_to_dict;
+use crate::scaffold::{self, ScaffoldDec};
+use crate::timing::since_epoch;
 use crate::view::{self, QueryParams};
 
 pub trait Source: Read + Seek + Send {}
@@ -29,8 +30,11 @@ type Dec = Decoder<Box<dyn Source>>;
 /// An open `.dlgs` stream (see `dlgs.open`).
 #[pyclass(module = "dlgs._dlgs", name = "Reader", frozen)]
 pub struct Reader {
-    dec: Mutex<Dec>,
-    scene: SceneHeader,
+    /// The decoder of a 3DGS file (variant 0); `None` for a Scaffold-GS file.
+    dec: Option<Mutex<Dec>>,
+    /// The decoder of a Scaffold-GS file (variant 1), whose frames need a camera.
+    pub(crate) sdec: Option<Mutex<ScaffoldDec>>,
+    pub(crate) scene: SceneHeader,
     version: (u16, u16),
     /// The static set of the last GOP asked for with `split=True`, shared between frames.
     statics: Mutex<Option<(u32, Py<PyDict>)>>,
@@ -38,14 +42,17 @@ pub struct Reader {
     pool: Option<rayon::ThreadPool>,
     /// The default orbit of the last GOP a camera index was resolved in.
     orbit: Mutex<Option<(u32, Vec<Camera>)>>,
-    /// The last merged frame's dynamic buffers, decoded into again by the next one.
-    reuse: Mutex<Option<Gaussians>>,
+    /// The arrays of the last merged frames, decoded into again once Python lets go of them.
+    pub(crate) recycler: crate::recycle::Recycler,
 }
 
-fn lock(m: &Mutex<Dec>) -> std::sync::MutexGuard<'_, Dec> {
+pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // A panic inside the decoder poisons the lock; its state is still a valid decoder.
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
+
+pub(crate) const SCAFFOLD_ONLY_FRAMES: &str = "a Scaffold-GS file (variant 1) has no canonical \
+     static/dynamic Gaussians: its Gaussians are generated per camera (frame(t, camera=...))";
 
 /// Open a path (str or os.PathLike) or bytes-like object.
 #[pyfunction]
@@ -71,18 +78,31 @@ pub fn open_reader(
             .extract()?;
         Box::new(Cursor::new(b))
     };
-    let mut dec = py
-        .allow_threads(|| Decoder::new(src, dlgs::Limits::default()))
+    let (dec, sdec, scene, version) = py
+        .allow_threads(|| {
+            let mut src = src;
+            let limits = dlgs::Limits::default();
+            let (is_scaffold, version) = scaffold::sniff(&mut src, &limits)?;
+            if is_scaffold {
+                let d = ScaffoldDec::new(src, limits)?;
+                let scene = d.scene().clone();
+                Ok((None, Some(Mutex::new(d)), scene, version))
+            } else {
+                let mut d = Decoder::new(src, limits)?;
+                let scene = d.scene().clone();
+                let version = d.reader().version();
+                Ok((Some(Mutex::new(d)), None, scene, version))
+            }
+        })
         .py_err()?;
-    let scene = dec.scene().clone();
-    let version = dec.reader().version();
     Ok(Reader {
-        dec: Mutex::new(dec),
+        dec,
+        sdec,
         scene,
         version,
         statics: Mutex::new(None),
-        reuse: Mutex::new(None),
         orbit: Mutex::new(None),
+        recycler: Default::default(),
         pool: match threads {
             None => None,
             Some(n) => Some(
@@ -101,19 +121,48 @@ fn gaussians_at(
     centre: [f32; 3],
     language: bool,
 ) -> dlgs::Result<Gaussians> {
-    let f = dec.frame_at(
+    dec.frame_at_merged(
         t,
         &FrameOptions {
             camera_center: centre,
             language,
         },
-    )?;
-    Ok(crate::arrays::merged(f.statics(), &f.dynamics))
+    )
 }
 
 impl Reader {
+    /// The 3DGS decoder; a request error for a Scaffold-GS file.
+    pub(crate) fn dec(&self) -> dlgs::Result<MutexGuard<'_, Dec>> {
+        match &self.dec {
+            Some(d) => Ok(lock(d)),
+            None => Err(dlgs::Error::request(SCAFFOLD_ONLY_FRAMES)),
+        }
+    }
+
+    pub fn is_scaffold(&self) -> bool {
+        self.sdec.is_some()
+    }
+
+    /// The Gaussians at `t` as `camera` sees them (static then dynamic; for a Scaffold-GS
+    /// file the neural Gaussians as 3D Gaussians, only the anchors in view with `cull`).
+    /// Called without the GIL.
+    fn gaussians_for(
+        &self,
+        t: f64,
+        camera: &Camera,
+        language: bool,
+        cull: bool,
+    ) -> dlgs::Result<Gaussians> {
+        match &self.sdec {
+            Some(s) => {
+                Ok(scaffold::neural_at(&mut lock(s), t, camera, language, cull)?.to_gaussians())
+            }
+            None => gaussians_at(&mut *self.dec()?, t, camera.position.to_array(), language),
+        }
+    }
+
     /// Run `f` without the GIL, on this reader's pool when it has one.
-    fn detach<T: Send>(&self, py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+    pub(crate) fn detach<T: Send>(&self, py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
         py.allow_threads(|| match &self.pool {
             Some(p) => p.install(f),
             None => f(),
@@ -142,16 +191,21 @@ impl Reader {
         Ok(cams)
     }
 
+    /// The undeformed Gaussians of the GOP shown at `t` (for a Scaffold-GS file, its anchors
+    /// at `t` as stand-ins, as the CLI places its orbit around them).
     pub fn canonical(&self, py: Python<'_>, t: f64) -> Res<Gaussians> {
         self.detach(py, || {
-            let mut d = lock(&self.dec);
+            if let Some(s) = &self.sdec {
+                return scaffold::anchor_stand_ins(&mut lock(s), t);
+            }
+            let mut d = self.dec()?;
             let gop = d.scene().locate(t)?.gop;
             Ok(d.gop_canonical(gop)?.merged())
         })
         .py_err()
     }
 
-    fn resolve(
+    pub(crate) fn resolve(
         &self,
         py: Python<'_>,
         cam: &Bound<'_, PyAny>,
@@ -162,18 +216,17 @@ impl Reader {
         camera::resolve(cam, width, height, || self.default_orbit(py, t))
     }
 
-    /// The Gaussians at `t` (static then dynamic) seen from `centre`.
+    /// The Gaussians at `t` (static then dynamic) seen by `camera` (every anchor of a
+    /// Scaffold-GS file decoded).
     pub fn gaussians(
         &self,
         py: Python<'_>,
         t: f64,
-        centre: [f32; 3],
+        camera: &Camera,
         language: bool,
     ) -> Res<Gaussians> {
-        self.detach(py, || {
-            gaussians_at(&mut lock(&self.dec), t, centre, language)
-        })
-        .py_err()
+        self.detach(py, || self.gaussians_for(t, camera, language, false))
+            .py_err()
     }
 
     /// The frame at `t` as one dict (static then dynamic) or split.
@@ -190,26 +243,22 @@ impl Reader {
             language: language && self.scene.lang_width() > 0,
         };
         if !split {
+            // Into the arrays of an earlier frame Python has released, if any (warm memory:
+            // the static rows copied, the dynamic rows decoded in place) ...
+            if let Some(d) = self.decode_into_free(py, t, &opts)? {
+                return Ok(d);
+            }
+            // ... else the static set is copied once into new merged buffers and the dynamic
+            // set is decoded straight into their tail; numpy then takes the buffers over.
             let g = self
-                .detach(py, || {
-                    // The dynamic set is decoded into the previous frame's buffers (warm
-                    // pages, as a player's `frame_at_reusing`), then copied once with the
-                    // static set into the arrays handed to Python.
-                    let mut reuse = self.reuse.lock().unwrap_or_else(|e| e.into_inner());
-                    let f = lock(&self.dec).frame_at_reusing(
-                        t,
-                        &opts,
-                        reuse.take().unwrap_or_default(),
-                    )?;
-                    let g = crate::arrays::merged(f.statics(), &f.dynamics);
-                    *reuse = Some(f.dynamics);
-                    Ok(g)
-                })
+                .detach(py, || self.dec()?.frame_at_merged(t, &opts))
                 .py_err()?;
-            return gaussians_to_dict(py, g);
+            let d = gaussians_to_dict(py, g)?;
+            self.recycler.remember(&d)?;
+            return Ok(d);
         }
         let frame = self
-            .detach(py, || lock(&self.dec).frame_at(t, &opts))
+            .detach(py, || self.dec()?.frame_at(t, &opts))
             .py_err()?;
         let gop = frame.time.gop;
         // The lock is never held while Python runs (another thread could then wait for it
@@ -275,7 +324,13 @@ impl Reader {
         d.set_item("lang_width", s.lang_width())?;
         d.set_item("language", s.lang_width() > 0)?;
         d.set_item("time_channels", s.time_channels)?;
-        d.set_item("variant", format!("{:?}", s.variant))?;
+        d.set_item(
+            "variant",
+            match s.variant {
+                dlgs::container::header::Variant::Scaffold => "scaffold",
+                _ => "3dgs",
+            },
+        )?;
         d.set_item("residual_mode", format!("{:?}", s.residual_mode))?;
         d.set_item("deform_model", format!("{:?}", s.deform_model))?;
         Ok(d)
@@ -300,8 +355,10 @@ impl Reader {
         self.scene.frame_count as usize
     }
 
-    /// The Gaussians shown at time `t` seconds (between frames too).
-    #[pyo3(signature = (t, camera=None, language=false, split=false))]
+    /// The Gaussians shown at time `t` seconds (between frames too). A Scaffold-GS file
+    /// needs `camera`; `cull` then decodes only the anchors in its view, `neural` returns the
+    /// MLP outputs as they are (see docs/python.md).
+    #[pyo3(signature = (t, camera=None, language=false, split=false, cull=false, neural=false))]
     fn frame<'py>(
         &self,
         py: Python<'py>,
@@ -309,13 +366,25 @@ impl Reader {
         camera: Option<&Bound<'py, PyAny>>,
         language: bool,
         split: bool,
+        cull: bool,
+        neural: bool,
     ) -> Res<Bound<'py, PyDict>> {
+        if self.is_scaffold() {
+            return self.scaffold_frame(py, t, camera, language, split, cull, neural);
+        }
+        if cull || neural {
+            return Err(request(
+                "cull and neural are for Scaffold-GS files (variant 1); this one is 3DGS",
+            ));
+        }
         let centre = centre_of(self, py, t, camera)?;
         self.frame_impl(py, t, centre, language, split)
     }
 
     /// Render the frame at `t` from `camera`: HxWx3 float32, and HxWxL features when asked.
-    #[pyo3(signature = (t, camera, width=None, height=None, features=false, background=(1.0, 1.0, 1.0)))]
+    /// `cull` (Scaffold-GS files): decode only the anchors whose children reach into the
+    /// view (the same image, less time; `dlgs render` without `--no-cull`).
+    #[pyo3(signature = (t, camera, width=None, height=None, features=false, background=(1.0, 1.0, 1.0), cull=true))]
     fn render<'py>(
         &self,
         py: Python<'py>,
@@ -325,12 +394,12 @@ impl Reader {
         height: Option<u32>,
         features: bool,
         background: (f32, f32, f32),
+        cull: bool,
     ) -> Res<Bound<'py, PyAny>> {
         let cam = self.resolve(py, camera, t, width, height)?;
         let bg = [background.0, background.1, background.2];
         let img = self.detach(py, || {
-            let g = gaussians_at(&mut lock(&self.dec), t, cam.position.to_array(), features)
-                .map_err(to_py)?;
+            let g = self.gaussians_for(t, &cam, features, cull).map_err(to_py)?;
             view::render_arrays(&g, &cam, features, bg)
         })?;
         let color = owned_array(py, img.color, &[img.height, img.width, 3])?;
@@ -377,7 +446,11 @@ impl Reader {
                 dlgs_query::decoder_io::load_lang_decoder(&p).map_err(crate::errors::other)?
             }
             None => self
-                .detach(py, || lock(&self.dec).lang_decoder())
+                .detach(py, || match self.is_scaffold() {
+                    // The Scaffold-GS decoder reads no LAED chunk (the HAC ingest writes none).
+                    true => Ok(None),
+                    false => self.dec()?.lang_decoder(),
+                })
                 .py_err()?
                 .ok_or_else(|| {
                     request("the stream has no language decoder (LAED): pass lang_decoder")
@@ -411,30 +484,11 @@ impl Reader {
             self.scene.lang_dims as usize,
         );
         let answers = self.detach(py, || {
-            let g = gaussians_at(&mut lock(&self.dec), t, cam.position.to_array(), true)
-                .map_err(to_py)?;
+            // Scaffold-GS: only the anchors in view (the same image).
+            let g = self.gaussians_for(t, &cam, true, true).map_err(to_py)?;
             view::query_arrays(&g, &cam, &dec, &positives, &negatives, shape, &params)
         })?;
-        let list = PyList::empty(py);
-        for a in answers {
-            let (h, w) = (a.height, a.width);
-            let d = PyDict::new(py);
-            let levels = a.levels.len();
-            let mut rel = Vec::with_capacity(levels * w * h);
-            let mut norm = Vec::with_capacity(levels * w * h);
-            let mut scores = Vec::with_capacity(levels);
-            for l in &a.levels {
-                rel.extend_from_slice(&l.relevance);
-                norm.extend_from_slice(&l.normalised);
-                scores.push(l.score);
-            }
-            d.set_item("relevance", owned_array(py, rel, &[levels, h, w])?)?;
-            d.set_item("normalised", owned_array(py, norm, &[levels, h, w])?)?;
-            d.set_item("scores", scores)?;
-            d.set_item("level", a.level)?;
-            d.set_item("mask", PyArray1::from_vec(py, a.mask).reshape([h, w])?)?;
-            list.append(d)?;
-        }
+        let list = view::answers_to_list(py, answers)?;
         if single {
             Ok(list.get_item(0)?)
         } else {
@@ -447,7 +501,7 @@ impl Reader {
     fn gop<'py>(&self, py: Python<'py>, g: u32) -> Res<Bound<'py, PyDict>> {
         let (gop, dynamic) = self
             .detach(py, || {
-                let gop = lock(&self.dec).gop(g)?;
+                let gop = self.dec()?.gop(g)?;
                 let dynamic = gop.dynamic()?;
                 Ok((gop, dynamic))
             })
@@ -479,20 +533,25 @@ impl Reader {
     /// merge, no numpy: the baseline `frame` is measured against; see docs/benchmarks/python.md).
     #[pyo3(signature = (times, language=false))]
     fn time_frame_at(&self, py: Python<'_>, times: Vec<f64>, language: bool) -> Res<Vec<f64>> {
-        let opts = FrameOptions {
-            camera_center: [0.0; 3],
-            language: language && self.scene.lang_width() > 0,
-        };
+        self.detach(py, || self.time_frames(&times, language))
+            .py_err()
+    }
+
+    /// As [`Self::time_frame_at`], and when the decoding ran: seconds on a clock shared by
+    /// every thread of the process, read inside the call with the GIL released (the threads
+    /// test checks that two threads' calls overlap).
+    #[pyo3(signature = (times, language=false))]
+    fn time_frame_span(
+        &self,
+        py: Python<'_>,
+        times: Vec<f64>,
+        language: bool,
+    ) -> Res<(f64, f64, Vec<f64>)> {
+        since_epoch();
         self.detach(py, || {
-            let mut d = lock(&self.dec);
-            let mut out = Vec::with_capacity(times.len());
-            for &t in &times {
-                let start = std::time::Instant::now();
-                let f = d.frame_at(t, &opts)?;
-                out.push(start.elapsed().as_secs_f64());
-                drop(std::hint::black_box(f));
-            }
-            Ok(out)
+            let start = since_epoch();
+            let each = self.time_frames(&times, language)?;
+            Ok((start, since_epoch(), each))
         })
         .py_err()
     }

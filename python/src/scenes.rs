@@ -23,19 +23,22 @@ pub fn read_scene<'py>(py: Python<'py>, path: PathBuf) -> Res<Bound<'py, PyDict>
 }
 
 /// Write a dict of arrays as INRIA PLY (`.ply`, with the language extras when present), SPZ
-/// (`.spz`, v3; `spz_version=2` for v2) or antimatter15 `.splat`. Returns the bytes written.
+/// (`.spz`, v3; `spz_version=2` for v2), antimatter15 `.splat` or PlayCanvas SOG (`.sog`
+/// bundled, or a path named `meta.json`: the unbundled files in its directory; no language).
+/// Returns the bytes written.
 #[pyfunction]
-#[pyo3(signature = (path, scene, spz_version=3))]
+#[pyo3(signature = (path, scene, spz_version=3, format=None))]
 pub fn write_scene(
     py: Python<'_>,
     path: PathBuf,
     scene: &Bound<'_, PyDict>,
     spz_version: u8,
+    format: Option<String>,
 ) -> Res<usize> {
     let g = dict_to_gaussians(scene, "scene")?;
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
+    let ext = format
+        .as_deref()
+        .or_else(|| path.extension().and_then(|e| e.to_str()))
         .unwrap_or("")
         .to_ascii_lowercase();
     let version = match spz_version {
@@ -43,18 +46,36 @@ pub fn write_scene(
         3 => SpzVersion::V3,
         v => return Err(request(format!("spz_version {v}: 2 or 3"))),
     };
+    let write = |p: &Path, bytes: &[u8]| {
+        std::fs::write(p, bytes)
+            .map_err(|e| to_py(dlgs::Error::io(format!("writing {}", p.display()), e, 0)))
+    };
+    let meta_json = path.file_name().and_then(|n| n.to_str()) == Some("meta.json");
+    if meta_json && matches!(ext.as_str(), "json" | "sog") {
+        // An unbundled SOG: meta.json and its textures side by side.
+        let files = py
+            .allow_threads(|| dlgs::interop::sog_write::write_sog_files(&g))
+            .py_err()?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let mut total = 0;
+        for (name, bytes) in &files {
+            write(&dir.join(name), bytes)?;
+            total += bytes.len();
+        }
+        return Ok(total);
+    }
     let bytes = py
         .allow_threads(|| match ext.as_str() {
             "ply" => dlgs::interop::ply::write_ply(&g),
             "spz" => write_spz(&g, version),
             "splat" => Ok(crate::splat_write::write_splat(&g)),
+            "sog" => dlgs::interop::sog_write::write_sog(&g),
             other => Err(dlgs::Error::request(format!(
-                "writing `.{other}`: the bindings write .ply, .spz and .splat (SOG is read only)"
+                "writing `.{other}`: the bindings write .ply, .spz, .splat, .sog and SOG's meta.json"
             ))),
         })
         .py_err()?;
-    std::fs::write(&path, &bytes)
-        .map_err(|e| to_py(dlgs::Error::io(format!("writing {}", path.display()), e, 0)))?;
+    write(&path, &bytes)?;
     Ok(bytes.len())
 }
 
@@ -82,10 +103,10 @@ impl Scene {
             Ok(Scene::Splat(g))
         }
     }
-    fn at(&self, py: Python<'_>, t: f64, centre: [f32; 3]) -> Res<Gaussians> {
+    fn at(&self, py: Python<'_>, t: f64, camera: &dlgs_render::Camera) -> Res<Gaussians> {
         match self {
             Scene::Splat(g) => Ok(g.clone()),
-            Scene::Dlgs(r) => r.gaussians(py, t, centre, false),
+            Scene::Dlgs(r) => r.gaussians(py, t, camera, false),
         }
     }
 }
@@ -129,9 +150,8 @@ pub fn compare<'py>(
     let views = PyList::empty(py);
     let (mut sp, mut ss) = (0.0, 0.0);
     for cam in &cams {
-        let c = cam.position.to_array();
-        let ga = sa.at(py, t, c)?;
-        let gb = sb.at(py, t, c)?;
+        let ga = sa.at(py, t, cam)?;
+        let gb = sb.at(py, t, cam)?;
         let (p, s) = py.allow_threads(|| {
             let ia = dlgs_render::render(&ga, cam, &opts).map_err(crate::errors::other)?;
             let ib = dlgs_render::render(&gb, cam, &opts).map_err(crate::errors::other)?;

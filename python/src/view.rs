@@ -6,6 +6,11 @@ use dlgs::Gaussians;
 use dlgs_query::{query_levels, Embeddings, ImageQuery, MaskParams, Precision, RelevanceField};
 use dlgs_render::{render, Camera, RenderOptions};
 
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::arrays::owned_array;
 use crate::errors::{other, request, Res};
 
 /// A rendered colour image (HxWx3, linear, not clamped) and, when asked, the language
@@ -108,4 +113,29 @@ pub fn embeddings(values: Vec<f32>, shape: &[usize], what: &str) -> Res<Embeddin
         .map(|i| values[i * d..(i + 1) * d].to_vec())
         .collect();
     Embeddings::from_rows((0..k).map(|i| i.to_string()).collect(), rows).map_err(request)
+}
+
+/// Query answers as the dicts `Reader.query` returns (one per text embedding).
+pub fn answers_to_list<'py>(py: Python<'py>, answers: Vec<ImageQuery>) -> Res<Bound<'py, PyList>> {
+    let list = PyList::empty(py);
+    for a in answers {
+        let (h, w) = (a.height, a.width);
+        let d = PyDict::new(py);
+        let levels = a.levels.len();
+        let mut rel = Vec::with_capacity(levels * w * h);
+        let mut norm = Vec::with_capacity(levels * w * h);
+        let mut scores = Vec::with_capacity(levels);
+        for l in &a.levels {
+            rel.extend_from_slice(&l.relevance);
+            norm.extend_from_slice(&l.normalised);
+            scores.push(l.score);
+        }
+        d.set_item("relevance", owned_array(py, rel, &[levels, h, w])?)?;
+        d.set_item("normalised", owned_array(py, norm, &[levels, h, w])?)?;
+        d.set_item("scores", scores)?;
+        d.set_item("level", a.level)?;
+        d.set_item("mask", PyArray1::from_vec(py, a.mask).reshape([h, w])?)?;
+        list.append(d)?;
+    }
+    Ok(list)
 }

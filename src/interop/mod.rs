@@ -6,6 +6,7 @@
 
 pub mod ply;
 pub mod sog;
+pub mod sog_write;
 pub mod splat;
 pub mod spz;
 pub mod spz_write;

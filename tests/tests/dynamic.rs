@@ -521,3 +521,43 @@ fn intra_only_features_seek_by_decoding_two_keys_and_give_the_same_frames() {
         "intra-only within 10 % of the bytes"
     );
 }
+
+#[test]
+fn merged_frames_decode_in_place_to_the_merged_frame() {
+    // `frame_at_merged` (what the Python bindings hand to numpy) decodes the dynamic set
+    // straight into the tail of the merged buffers, `frame_at_merged_into` into memory the
+    // caller owns (numpy's, reused): the same floats as `Frame::merged`.
+    let m = model(true, 2);
+    let bytes = exact(&m);
+    let mut dec = open(&bytes);
+    let cam = camera(&m);
+    let end = dec.scene().duration_seconds();
+    for t in [0.0, 0.4321, end / 2.0, end] {
+        for language in [false, true] {
+            let o = opts(&cam, language);
+            let want = dec.frame_at(t, &o).unwrap().merged();
+            let got = dec.frame_at_merged(t, &o).unwrap();
+            assert_eq!(got, want, "t = {t}, language {language}");
+            let s = dec.scene();
+            assert_eq!(got.len() as u32, s.n_static + s.n_dynamic);
+            assert!(s.n_static > 0 && s.n_dynamic > 0 && got.has_language());
+            // Into caller-owned slices holding garbage: the same floats again.
+            let mut into = want.clone();
+            for v in into.sh.iter_mut().chain(&mut into.opacity) {
+                *v = f32::NAN;
+            }
+            into.positions.iter_mut().for_each(|p| *p = [7.0; 3]);
+            let slices = dlgs_decoder::FrameSlices {
+                positions: &mut into.positions,
+                log_scales: &mut into.log_scales,
+                rotations: &mut into.rotations,
+                opacity: &mut into.opacity,
+                lang_opacity: &mut into.lang_opacity,
+                sh: &mut into.sh,
+                lang: &mut into.lang,
+            };
+            dec.frame_at_merged_into(t, &o, slices).unwrap();
+            assert_eq!(into, want, "t = {t}, language {language}, into slices");
+        }
+    }
+}
