@@ -408,3 +408,47 @@ fn a_parallel_scaffold_header_is_refused() {
         .unwrap_err();
     assert!(matches!(e, dlgs::Error::Input(_)), "{e}");
 }
+
+/// Timing (not asserted; `cargo test --release -p dlgs-tests --test scaffold_residual --
+/// --ignored --nocapture`): GOP 1's canonical anchors from GOP 0's (the RNTC decoded and
+/// applied), and frames of GOP 1 through `frame_in_view` (every anchor kept), median of 15.
+#[test]
+#[ignore]
+fn timing_of_residual_gops_and_frames() {
+    use std::time::Instant;
+    let bytes = file(true, 2);
+    let mut dec = decoder(bytes);
+    dec.canonical(0).unwrap();
+    let t0 = Instant::now();
+    dec.canonical(1).unwrap();
+    println!("GOP 1 canonical from GOP 0's (RNTC decode + apply): {:.1} ms", t0.elapsed().as_secs_f64() * 1e3);
+    dec.gop(1).unwrap();
+    let all = |p: &[[f32; 3]], _: &[f32]| vec![true; p.len()];
+    let mut ms = Vec::new();
+    let mut anchors_ms = Vec::new();
+    let mut reach_ms = Vec::new();
+    for i in 0..15 {
+        let t = 2.0 + i as f64 * 0.13;
+        let s = Instant::now();
+        let (f, kept) = dec.frame_in_view(t, CAMERAS[0], true, &all).unwrap();
+        ms.push(s.elapsed().as_secs_f64() * 1e3);
+        assert_eq!(kept, 2400);
+        assert!(f.len() > 1000);
+        let gop = dec.gop(1).unwrap();
+        let tp = dec.scene().locate(t).unwrap();
+        let s = Instant::now();
+        let (_, state) = gop.anchors_at(tp.key, tp.delta);
+        anchors_ms.push(s.elapsed().as_secs_f64() * 1e3);
+        let s = Instant::now();
+        let reach = gop.reach(&state);
+        reach_ms.push(s.elapsed().as_secs_f64() * 1e3);
+        assert_eq!(reach, dlgs_decoder::scaffold::anchor_reach(&state));
+    }
+    ms.sort_by(f64::total_cmp);
+    anchors_ms.sort_by(f64::total_cmp);
+    reach_ms.sort_by(f64::total_cmp);
+    println!(
+        "GOP 1 frame_in_view (2,400 anchors kept): median {:.2} ms (min {:.2}); anchors_at: median {:.3} ms (min {:.3}); reach: median {:.3} ms (min {:.3})",
+        ms[7], ms[0], anchors_ms[7], anchors_ms[0], reach_ms[7], reach_ms[0]
+    );
+}

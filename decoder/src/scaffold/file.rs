@@ -26,16 +26,37 @@ pub struct ScaffoldGop {
     pub mlps: ScaffoldMlps,
     /// With dynamic anchors: their deformation and key time features.
     pub dynamic: Option<(AnchorDeformation, TimeFeatures)>,
+    /// What does not change with the time, computed once per GOP: every anchor's canonical
+    /// position (static, then dynamic) and the static anchors' reach.
+    positions: Vec<[f32; 3]>,
+    static_reach: Vec<f32>,
 }
 
 impl ScaffoldGop {
+    /// A GOP from its parts (the per-GOP caches are computed here).
+    pub fn new(
+        index: u32,
+        canonical: ScaffoldCanonical,
+        mlps: ScaffoldMlps,
+        dynamic: Option<(AnchorDeformation, TimeFeatures)>,
+    ) -> Self {
+        let mut positions = canonical.statics.positions.clone();
+        positions.extend_from_slice(&canonical.dynamics.positions);
+        let static_reach = super::anchor_reach(&canonical.statics);
+        ScaffoldGop {
+            index,
+            canonical,
+            mlps,
+            dynamic,
+            positions,
+            static_reach,
+        }
+    }
+
     /// Every anchor at key pair (`key`, `key + 1`), fraction `delta`: static anchors as stored,
     /// dynamic ones deformed (§6.12). Returns (pre-deformation positions, state).
-    pub fn anchors_at(&self, key: usize, delta: f32) -> (Vec<[f32; 3]>, Anchors) {
+    pub fn anchors_at(&self, key: usize, delta: f32) -> (&[[f32; 3]], Anchors) {
         let c = &self.canonical;
-        let mut view = c.statics.positions.clone();
-        view.extend_from_slice(&c.dynamics.positions);
-        let mut state = c.statics.clone();
         let moved;
         let dynamics = match &self.dynamic {
             Some((d, f)) => {
@@ -51,11 +72,33 @@ impl ScaffoldGop {
             }
             None => &c.dynamics,
         };
-        state.positions.extend_from_slice(&dynamics.positions);
-        state.features.extend_from_slice(&dynamics.features);
-        state.offsets.extend_from_slice(&dynamics.offsets);
-        state.log_scalings.extend_from_slice(&dynamics.log_scalings);
-        (view, state)
+        // One allocation per attribute, sized for both sets.
+        let join = |a: &[f32], b: &[f32]| {
+            let mut v = Vec::with_capacity(a.len() + b.len());
+            v.extend_from_slice(a);
+            v.extend_from_slice(b);
+            v
+        };
+        let mut positions = Vec::with_capacity(self.positions.len());
+        positions.extend_from_slice(&c.statics.positions);
+        positions.extend_from_slice(&dynamics.positions);
+        let state = Anchors {
+            positions,
+            features: join(&c.statics.features, &dynamics.features),
+            offsets: join(&c.statics.offsets, &dynamics.offsets),
+            log_scalings: join(&c.statics.log_scalings, &dynamics.log_scalings),
+        };
+        (&self.positions, state)
+    }
+
+    /// How far each anchor of `state` (from [`Self::anchors_at`]) can reach
+    /// ([`super::anchor_reach`]); the static anchors' is computed once per GOP.
+    pub fn reach(&self, state: &Anchors) -> Vec<f32> {
+        let ns = self.static_reach.len();
+        let mut r = Vec::with_capacity(state.len());
+        r.extend_from_slice(&self.static_reach);
+        r.extend(super::neural::anchor_reach_range(state, ns..state.len()));
+        r
     }
 }
 
@@ -148,12 +191,12 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         } else {
             None
         };
-        let gop = Arc::new(ScaffoldGop {
-            index: g,
-            canonical: state.canonical.clone(),
-            mlps: state.mlps.clone(),
+        let gop = Arc::new(ScaffoldGop::new(
+            g,
+            state.canonical.clone(),
+            state.mlps.clone(),
             dynamic,
-        });
+        ));
         self.last = Some(gop.clone());
         Ok(gop)
     }
@@ -257,7 +300,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let tp = self.scene().locate(t)?;
         let gop = self.gop(tp.gop)?;
         let (positions, state) = gop.anchors_at(tp.key, tp.delta);
-        Ok(neural_gaussians(&positions, &state, &gop.mlps, view))
+        Ok(neural_gaussians(positions, &state, &gop.mlps, view))
     }
 
     /// As [`Self::frame_at`], decoding only the anchors `in_view(positions, reach)` keeps: it
@@ -273,7 +316,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let tp = self.scene().locate(t)?;
         let gop = self.gop(tp.gop)?;
         let (positions, state) = gop.anchors_at(tp.key, tp.delta);
-        let visible = in_view(&state.positions, &super::anchor_reach(&state));
+        let visible = in_view(&state.positions, &gop.reach(&state));
         if visible.len() != state.len() {
             return Err(Error::request("the view test must answer once per anchor"));
         }
@@ -283,6 +326,6 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
             language,
             visible: Some(&visible),
         };
-        Ok((neural_gaussians(&positions, &state, &gop.mlps, &view), kept))
+        Ok((neural_gaussians(positions, &state, &gop.mlps, &view), kept))
     }
 }
