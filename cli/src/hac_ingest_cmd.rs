@@ -12,10 +12,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use dlgs::chunks::tfea::{TfeaBody, Tiling};
 use dlgs::container::ChunkType;
+use dlgs::container::ResidualMode;
 use dlgs::model::scaffold::{
     AnchorDeformation, Anchors, ScaffoldCanonical, FEAT_DIM, N_OFFSETS, SCALING_DIM,
 };
-use dlgs::container::ResidualMode;
 use dlgs_encoder::scaffold::{scaffold_scene, ResidualViewMlps, ScaffoldWriter};
 use dlgs_ingest::hac::{self, HacGop, HacLimits};
 use dlgs_ingest::ref_gop::FeatureSource;
@@ -226,7 +226,11 @@ pub fn run_hac_ingest(
         let dynamic = body.as_ref().map(|b| (&deformation, b));
         match (sequential && g > 0, decoded.take(), &gop.ntc) {
             (true, Some((prev, prev_mlps)), Some(ntc)) => {
-                let mlp = gop.mlps.ntc.as_ref().context("an NTC GOP without ntc_mlp")?;
+                let mlp = gop
+                    .mlps
+                    .ntc
+                    .as_ref()
+                    .context("an NTC GOP without ntc_mlp")?;
                 let field = hac::ntc::to_field(
                     &ntc.plane_bits,
                     &ntc.gate_bits,

@@ -6,11 +6,11 @@
 
 use std::io::Write;
 
+use dlgs::chunks::rntc;
 use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::chunks::{adef, amlp, ancr};
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
-use dlgs::chunks::rntc;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::scaffold::{
     check_scene, AnchorDeformation, ScaffoldCanonical, ScaffoldMlps, TwoLayer, TIME_CHANNELS,

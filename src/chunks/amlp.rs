@@ -20,7 +20,7 @@ const FLAG_LANGUAGE_ONLY: u8 = 2;
 #[derive(Debug, Clone, PartialEq)]
 pub enum AmlpPayload {
     /// Every view MLP.
-    Full(ScaffoldMlps),
+    Full(Box<ScaffoldMlps>),
     /// The language MLP alone (flags bit 1); the others are the reference GOP's.
     LanguageOnly(TwoLayer),
 }
@@ -29,7 +29,7 @@ impl AmlpPayload {
     /// The GOP's view MLPs, given its reference GOP's (`None` for an intra GOP).
     pub fn resolve(self, reference: Option<&ScaffoldMlps>) -> Option<ScaffoldMlps> {
         match self {
-            AmlpPayload::Full(m) => Some(m),
+            AmlpPayload::Full(m) => Some(*m),
             AmlpPayload::LanguageOnly(l) => reference.map(|r| ScaffoldMlps {
                 language: Some(l),
                 ..r.clone()
@@ -116,7 +116,7 @@ pub fn encode_language_only(
 /// Decode the `AMLP` of an intra GOP: every view MLP (a language-only payload is `Payload`).
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<ScaffoldMlps> {
     match decode_any(p, offset, scene, limits)? {
-        AmlpPayload::Full(m) => Ok(m),
+        AmlpPayload::Full(m) => Ok(*m),
         AmlpPayload::LanguageOnly(_) => Err(Error::payload(
             ChunkType::AMLP,
             "a language-only AMLP (flags bit 1) in a GOP without a reference GOP",
@@ -164,10 +164,10 @@ pub fn decode_any(
     if only {
         return Ok(AmlpPayload::LanguageOnly(next()));
     }
-    Ok(AmlpPayload::Full(ScaffoldMlps {
+    Ok(AmlpPayload::Full(Box::new(ScaffoldMlps {
         opacity: next(),
         color: next(),
         cov: next(),
         language: language.then(&mut next),
-    }))
+    })))
 }

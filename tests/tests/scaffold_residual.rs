@@ -13,8 +13,7 @@ use dlgs::chunks::tfea::TfeaBody;
 use dlgs::container::ResidualMode;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::scaffold::{
-    AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps, FEAT_DIM, N_OFFSETS,
-    SCALING_DIM,
+    AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps, FEAT_DIM, N_OFFSETS, SCALING_DIM,
 };
 use dlgs::model::TimeFeatures;
 use dlgs_decoder::scaffold::{NeuralGaussians, ScaffoldDecoder, ViewRequest};
@@ -198,7 +197,11 @@ fn gop1_canonical_matches_the_reference_decode() {
     assert!(bytes.len() + 700_000 < intra.len());
 }
 
-fn frame(dec: &mut ScaffoldDecoder<std::io::Cursor<Vec<u8>>>, t: f64, cam: [f32; 3]) -> NeuralGaussians {
+fn frame(
+    dec: &mut ScaffoldDecoder<std::io::Cursor<Vec<u8>>>,
+    t: f64,
+    cam: [f32; 3],
+) -> NeuralGaussians {
     let req = ViewRequest {
         camera_center: cam,
         language: true,
@@ -314,15 +317,33 @@ fn damaged_anchor_residuals_give_typed_errors() {
     decode_gop1(bytes.clone()).unwrap();
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         // A 3DGS group bit (sh_dc) in an anchor residual.
-        ("group bit 3", edit_chunk(&bytes, b"RNTC", |p| p[0] = 0b1011), "Payload"),
+        (
+            "group bit 3",
+            edit_chunk(&bytes, b"RNTC", |p| p[0] = 0b1011),
+            "Payload",
+        ),
         // log_scaling added: 86 outputs, the MLP stores 80.
-        ("groups 0b111", edit_chunk(&bytes, b"RNTC", |p| p[0] = 0b111), "Payload"),
-        ("sets 4", edit_chunk(&bytes, b"RNTC", |p| p[1] = 4), "Payload"),
-        ("levels 0", edit_chunk(&bytes, b"RNTC", |p| p[5] = 0), "Payload"),
+        (
+            "groups 0b111",
+            edit_chunk(&bytes, b"RNTC", |p| p[0] = 0b111),
+            "Payload",
+        ),
+        (
+            "sets 4",
+            edit_chunk(&bytes, b"RNTC", |p| p[1] = 4),
+            "Payload",
+        ),
+        (
+            "levels 0",
+            edit_chunk(&bytes, b"RNTC", |p| p[5] = 0),
+            "Payload",
+        ),
         // bmax.x below bmin.x.
         (
             "box",
-            edit_chunk(&bytes, b"RNTC", |p| p[20..24].copy_from_slice(&(-9f32).to_le_bytes())),
+            edit_chunk(&bytes, b"RNTC", |p| {
+                p[20..24].copy_from_slice(&(-9f32).to_le_bytes())
+            }),
             "Payload",
         ),
         // A coded segment's first word changed: its bit count no longer matches.
@@ -331,11 +352,16 @@ fn damaged_anchor_residuals_give_typed_errors() {
             edit_chunk(&bytes, b"RNTC", |p| {
                 let s = 36 + 4 * 4 + 4;
                 let first = (0..13)
-                    .map(|i| u32::from_le_bytes(p[s + 8 * i + 4..s + 8 * i + 8].try_into().unwrap()))
+                    .map(|i| {
+                        u32::from_le_bytes(p[s + 8 * i + 4..s + 8 * i + 8].try_into().unwrap())
+                    })
                     .position(|n| n > 0)
                     .unwrap();
                 let skip: usize = (0..first)
-                    .map(|i| u32::from_le_bytes(p[s + 8 * i + 4..s + 8 * i + 8].try_into().unwrap()) as usize)
+                    .map(|i| {
+                        u32::from_le_bytes(p[s + 8 * i + 4..s + 8 * i + 8].try_into().unwrap())
+                            as usize
+                    })
                     .sum();
                 p[s + 8 * 13 + skip] ^= 0xA5;
             }),
@@ -348,7 +374,9 @@ fn damaged_anchor_residuals_give_typed_errors() {
                 let n = p.len();
                 let k = (0..n - 4)
                     .rev()
-                    .find(|&k| u32::from_le_bytes(p[k..k + 4].try_into().unwrap()) as usize == n - k - 4)
+                    .find(|&k| {
+                        u32::from_le_bytes(p[k..k + 4].try_into().unwrap()) as usize == n - k - 4
+                    })
                     .unwrap();
                 let w = (n - k - 5) as u32;
                 p[k..k + 4].copy_from_slice(&w.to_le_bytes());
@@ -399,10 +427,15 @@ fn a_parallel_scaffold_header_is_refused() {
         .unwrap();
     assert_eq!(e.name(), "Payload", "{e}");
     // A residual GOP in an intra scene is refused by the writer.
-    let mut w = ScaffoldWriter::new(Vec::new(), decoder(file(false, 2)).scene().clone(), 3).unwrap();
+    let mut w =
+        ScaffoldWriter::new(Vec::new(), decoder(file(false, 2)).scene().clone(), 3).unwrap();
     let (d, f) = dynamic(0);
-    w.push_gop(&split(&gops()[0].anchors, gops()[0].n_static), &view_mlps(0), Some((&d, &f)))
-        .unwrap();
+    w.push_gop(
+        &split(&gops()[0].anchors, gops()[0].n_static),
+        &view_mlps(0),
+        Some((&d, &f)),
+    )
+    .unwrap();
     let e = w
         .push_residual_gop(&field(), ResidualViewMlps::Inherit, Some((&d, &f)))
         .unwrap_err();
@@ -421,7 +454,10 @@ fn timing_of_residual_gops_and_frames() {
     dec.canonical(0).unwrap();
     let t0 = Instant::now();
     dec.canonical(1).unwrap();
-    println!("GOP 1 canonical from GOP 0's (RNTC decode + apply): {:.1} ms", t0.elapsed().as_secs_f64() * 1e3);
+    println!(
+        "GOP 1 canonical from GOP 0's (RNTC decode + apply): {:.1} ms",
+        t0.elapsed().as_secs_f64() * 1e3
+    );
     dec.gop(1).unwrap();
     let all = |p: &[[f32; 3]], _: &[f32]| vec![true; p.len()];
     let mut ms = Vec::new();

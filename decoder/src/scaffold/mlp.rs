@@ -5,8 +5,8 @@
 //! gives the same bits on every platform and thread count.
 
 use dlgs::elementary::sigmoid_f32;
-use multiversion::multiversion;
 use dlgs::model::scaffold::{Activation, Dense, TwoLayer};
+use multiversion::multiversion;
 
 use crate::panel::tanh_f32;
 

@@ -119,8 +119,7 @@ pub fn to_field(
         gate_log2_table: GATE_LOG2 as u8,
     };
     let level = config.level_bits();
-    if plane_bits.len() != 3 * PLANE_RES.len() * level || gate_bits.len() != config.gate_table()
-    {
+    if plane_bits.len() != 3 * PLANE_RES.len() * level || gate_bits.len() != config.gate_table() {
         return None;
     }
     mlp.check("ntc_mlp", NTC_IN, NTC_OUT, true).ok()?;

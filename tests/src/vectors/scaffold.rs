@@ -123,7 +123,11 @@ fn residual_field(lo: [f32; 3], hi: [f32; 3]) -> dlgs::model::ntc::NtcField {
         .map(|_| bits(config.level_bits()))
         .collect();
     let gate = bits(config.gate_table());
-    let (i, h, o) = (config.input_width(), 6, FEAT_DIM + 3 * N_OFFSETS + SCALING_DIM);
+    let (i, h, o) = (
+        config.input_width(),
+        6,
+        FEAT_DIM + 3 * N_OFFSETS + SCALING_DIM,
+    );
     let mut rng = fastrand::Rng::with_seed(54);
     let mut w = |n: usize, s: f32| (0..n).map(|_| (rng.f32() - 0.5) * s).collect::<Vec<f32>>();
     let mlp = NtcMlp {
@@ -161,8 +165,12 @@ pub fn residual_bytes() -> Vec<u8> {
         *b += 0.25;
     }
     let field = residual_field(d.bound_min, d.bound_max);
-    w.push_residual_gop(&field, ResidualViewMlps::LanguageOnly(&lang), Some((&d, &f)))
-        .unwrap();
+    w.push_residual_gop(
+        &field,
+        ResidualViewMlps::LanguageOnly(&lang),
+        Some((&d, &f)),
+    )
+    .unwrap();
     w.finish().unwrap()
 }
 
