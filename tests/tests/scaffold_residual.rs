@@ -488,3 +488,45 @@ fn timing_of_residual_gops_and_frames() {
         ms[7], ms[0], anchors_ms[7], anchors_ms[0], reach_ms[7], reach_ms[0]
     );
 }
+
+/// The chunk rules of a residual GOP (format-spec §3.3, §6.9): an `ANCR` in it is `Order`, no
+/// `RNTC` is `MissingChunk`; an `RNTC` in an intra GOP is ignored.
+#[test]
+fn residual_gop_chunk_rules() {
+    use dlgs::chunks::{adef, amlp, ancr, rntc, tfea};
+    use dlgs::container::{ChunkType, Writer, FLAG_MUST_UNDERSTAND};
+    let g = gops();
+    let scene = decoder(file(true, 2)).scene().clone();
+    let c0 = split(&g[0].anchors, g[0].n_static);
+    let (d, f) = dynamic(1);
+    let build = |scene: &dlgs::container::SceneHeader, gop1: &[ChunkType]| -> Vec<u8> {
+        let mut w = Writer::new(Vec::new(), scene.clone()).unwrap();
+        for kinds in [&[ChunkType::ANCR][..], gop1] {
+            w.begin_gop().unwrap();
+            for &ty in kinds
+                .iter()
+                .chain(&[ChunkType::AMLP, ChunkType::ADEF, ChunkType::TFEA])
+            {
+                let p = match ty {
+                    ChunkType::ANCR => ancr::encode(&c0, scene, 3).unwrap(),
+                    ChunkType::RNTC => rntc::encode(&field(), scene, 3).unwrap(),
+                    ChunkType::AMLP => amlp::encode(&view_mlps(0), scene, 3).unwrap(),
+                    ChunkType::ADEF => adef::encode(&d, 3).unwrap(),
+                    _ => tfea::encode(&f, 3).unwrap(),
+                };
+                w.gop_chunk(ty, FLAG_MUST_UNDERSTAND, &p).unwrap();
+            }
+        }
+        w.finish().unwrap()
+    };
+    let e = decode_gop1(build(&scene, &[ChunkType::ANCR])).unwrap_err();
+    assert_eq!(e.name(), "Order", "{e}");
+    let e = decode_gop1(build(&scene, &[])).unwrap_err();
+    assert_eq!(e.name(), "MissingChunk", "{e}");
+    decode_gop1(build(&scene, &[ChunkType::RNTC])).unwrap();
+    // Intra scene: GOP 1 with ANCR and a stray RNTC decodes to its ANCR.
+    let mut intra = scene.clone();
+    intra.residual_mode = ResidualMode::Intra;
+    let mut dec = decoder(build(&intra, &[ChunkType::ANCR, ChunkType::RNTC]));
+    assert_eq!(dec.canonical(1).unwrap(), c0);
+}
