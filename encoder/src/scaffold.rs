@@ -98,9 +98,9 @@ impl<W: Write> ScaffoldWriter<W> {
         dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
     ) -> Result<()> {
         let s = self.writer.scene().clone();
-        if s.residual_mode != ResidualMode::Intra && self.gops > 0 {
+        if self.has_reference() {
             return Err(Error::input(
-                "in a sequential Scaffold-GS scene every GOP after the first is a residual GOP",
+                "in a sequential Scaffold-GS scene this GOP is a residual GOP (push_residual_gop)",
             ));
         }
         mlps.check().map_err(Error::input)?;
@@ -120,7 +120,7 @@ impl<W: Write> ScaffoldWriter<W> {
         dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
     ) -> Result<()> {
         let s = self.writer.scene().clone();
-        if s.residual_mode != ResidualMode::Sequential || self.gops == 0 {
+        if !self.has_reference() {
             return Err(Error::input(
                 "a residual GOP needs a sequential scene (residual_mode 1) and a previous GOP",
             ));
@@ -145,6 +145,13 @@ impl<W: Write> ScaffoldWriter<W> {
         };
         let dyn_chunks = self.dynamic_chunks(dynamic)?;
         self.write_gop(ChunkType::RNTC, &residual, view.as_deref(), dyn_chunks)
+    }
+
+    /// Whether the next GOP has a reference GOP (§5.1: it then must be a residual GOP).
+    fn has_reference(&self) -> bool {
+        self.gops < self.writer.scene().gop_count
+            && dlgs::container::GopHeader::expected(self.writer.scene(), self.gops).reference_gop
+                != dlgs::container::NO_REFERENCE
     }
 
     fn dynamic_chunks(
