@@ -2,17 +2,21 @@
 //! runs: every GOP folder's bitstreams decoded as the reference's decoder does
 //! (`dlgs_ingest::hac`), its time-feature video passed through (or decoded, with
 //! `--exact-features`), and the anchors re-packed losslessly as a Scaffold-GS `.dlgs`
-//! (format-spec §6.9-§6.12), with bytes per frame against the reference's own count.
+//! (format-spec §6.9-§6.12), with bytes per frame against the reference's own count. GOPs
+//! after the first that the reference codes as an NTC residual are written as such (`RNTC`
+//! over anchor groups, view MLPs inherited or language-only; since 1.17) unless
+//! `--residual-mode intra` asks for full anchors in every GOP.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use dlgs::chunks::tfea::{TfeaBody, Tiling};
 use dlgs::container::ChunkType;
+use dlgs::container::ResidualMode;
 use dlgs::model::scaffold::{
     AnchorDeformation, Anchors, ScaffoldCanonical, FEAT_DIM, N_OFFSETS, SCALING_DIM,
 };
-use dlgs_encoder::scaffold::{scaffold_scene, ScaffoldWriter};
+use dlgs_encoder::scaffold::{scaffold_scene, ResidualViewMlps, ScaffoldWriter};
 use dlgs_ingest::hac::{self, HacGop, HacLimits};
 use dlgs_ingest::ref_gop::FeatureSource;
 use dlgs_ingest::{csv, run};
@@ -57,6 +61,14 @@ pub fn hac_gops(inputs: &[PathBuf]) -> Option<Vec<PathBuf>> {
     (!out.is_empty()).then_some(out)
 }
 
+/// The two view-MLP sets differ at most in the language MLP.
+fn same_but_language(
+    a: &dlgs::model::scaffold::ScaffoldMlps,
+    b: &dlgs::model::scaffold::ScaffoldMlps,
+) -> bool {
+    a.opacity == b.opacity && a.color == b.color && a.cov == b.cov
+}
+
 fn split(a: &Anchors, n_static: usize) -> ScaffoldCanonical {
     let part = |r: std::ops::Range<usize>| Anchors {
         positions: a.positions[r.clone()].to_vec(),
@@ -88,11 +100,28 @@ fn reference_bytes(dir: &Path) -> u64 {
         + size(q.join("compression_info.csv"))
 }
 
+/// Largest |difference| between two anchor sets' features, offsets and log-scalings.
+fn max_abs_diff(a: &ScaffoldCanonical, b: &ScaffoldCanonical) -> f32 {
+    let values = |c: &ScaffoldCanonical| {
+        [&c.statics, &c.dynamics]
+            .into_iter()
+            .flat_map(|s| s.features.iter().chain(&s.offsets).chain(&s.log_scalings))
+            .copied()
+            .collect::<Vec<f32>>()
+    };
+    values(a)
+        .iter()
+        .zip(values(b))
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
 pub fn run_hac_ingest(
     dirs: &[PathBuf],
     output: &Path,
     fps: u32,
     exact_features: bool,
+    residual_mode: Option<&str>,
 ) -> Result<()> {
     let limits = dlgs::Limits::default();
     let pb = bar(dirs.len() as u64, "decoding HAC bitstreams");
@@ -108,7 +137,16 @@ pub fn run_hac_ingest(
     let n_static = g0.n_static;
     let n_dynamic = g0.anchors.len() - n_static;
     let language = g0.mlps.language.is_some();
-    let scene = scaffold_scene(
+    // GOPs 1.. as the reference's NTC residuals (sequential) when every one has them.
+    let all_ntc = gops.len() > 1 && gops[1..].iter().all(|g| g.ntc.is_some());
+    let sequential = match residual_mode {
+        None => all_ntc,
+        Some("intra") => false,
+        Some("sequential") if all_ntc => true,
+        Some("sequential") => bail!("--residual-mode sequential: not every GOP after the first has an NTC residual (ntc_2D.b)"),
+        Some(m) => bail!("a HAC run is written with --residual-mode intra or sequential, not {m}"),
+    };
+    let mut scene = scaffold_scene(
         n_static as u32,
         n_dynamic as u32,
         language,
@@ -117,16 +155,22 @@ pub fn run_hac_ingest(
         KEY_INTERVAL,
         GOP_LENGTH * gops.len() as u32,
     );
+    if sequential {
+        scene.residual_mode = ResidualMode::Sequential;
+    }
     let mut w = ScaffoldWriter::new(Vec::new(), scene, 19)?;
     let meta = serde_json::json!({
         "source": "DLGStream reference implementation output (HAC / Scaffold-GS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
-        "settings": { "exact_features": exact_features },
+        "settings": { "exact_features": exact_features, "residual_mode": if sequential { "sequential" } else { "intra" } },
     });
     w.scene_chunk(ChunkType::META, &serde_json::to_vec(&meta)?)?;
     let pb = bar(gops.len() as u64, "writing");
     let (mut chunks, mut repaired, mut unverified) = (0, 0, 0);
+    // The canonical anchors and view MLPs a decoder holds after each GOP (residual chain).
+    let mut decoded: Option<(ScaffoldCanonical, dlgs::model::scaffold::ScaffoldMlps)> = None;
+    let mut residual_notes = Vec::new();
     for (g, (gop, dir)) in gops.iter().zip(dirs).enumerate() {
         chunks += gop.report.chunks;
         repaired += gop.report.repaired.len();
@@ -179,8 +223,53 @@ pub fn run_hac_ingest(
         } else {
             None
         };
-        w.push_gop(&canonical, &mlps, body.as_ref().map(|b| (&deformation, b)))
-            .with_context(|| format!("writing GOP {g}"))?;
+        let dynamic = body.as_ref().map(|b| (&deformation, b));
+        match (sequential && g > 0, decoded.take(), &gop.ntc) {
+            (true, Some((prev, prev_mlps)), Some(ntc)) => {
+                let mlp = gop
+                    .mlps
+                    .ntc
+                    .as_ref()
+                    .context("an NTC GOP without ntc_mlp")?;
+                let field = hac::ntc::to_field(
+                    &ntc.plane_bits,
+                    &ntc.gate_bits,
+                    mlp,
+                    gop.bound_min,
+                    gop.bound_max,
+                )
+                .with_context(|| format!("GOP {g}: the NTC is not the reference's shape"))?;
+                // GOP 0's opacity/colour/cov always; the language MLP is the GOP's own.
+                let view = if mlps == prev_mlps {
+                    ResidualViewMlps::Inherit
+                } else if same_but_language(&mlps, &prev_mlps) {
+                    ResidualViewMlps::LanguageOnly(mlps.language.as_ref().expect("differs"))
+                } else {
+                    ResidualViewMlps::Full(&mlps)
+                };
+                let kind = match view {
+                    ResidualViewMlps::Inherit => "inherited",
+                    ResidualViewMlps::LanguageOnly(_) => "language MLP only",
+                    ResidualViewMlps::Full(_) => "full",
+                };
+                w.push_residual_gop(&field, view, dynamic)
+                    .with_context(|| format!("writing GOP {g}"))?;
+                let ours = prev
+                    .with_residual(&field)
+                    .map_err(|e| anyhow::anyhow!("GOP {g}: {e}"))?;
+                residual_notes.push(format!(
+                    "GOP {g}: RNTC residual, AMLP {kind}; decoded anchors vs the reference \
+                     decoder's arithmetic (dlgs-ingest): max |diff| {:.3e}",
+                    max_abs_diff(&ours, &canonical)
+                ));
+                decoded = Some((ours, mlps));
+            }
+            _ => {
+                w.push_gop(&canonical, &mlps, dynamic)
+                    .with_context(|| format!("writing GOP {g}"))?;
+                decoded = Some((canonical, mlps));
+            }
+        }
         pb.set_position(g as u64 + 1);
     }
     pb.finish_and_clear();
@@ -197,11 +286,14 @@ pub fn run_hac_ingest(
     );
     println!(
         "bytes per frame: reference {:.1} (bitstreams, mp4, mlps.pth, csv), .dlgs {:.1} ({:.1} %; \
-         anchors stored raw, HAC-style coding not yet)",
+         GOP 0's anchors stored raw, HAC-style coding not yet)",
         reference as f64 / frames,
         bytes.len() as f64 / frames,
         100.0 * bytes.len() as f64 / reference.max(1) as f64
     );
+    for n in &residual_notes {
+        println!("{n}");
+    }
     if chunks > 0 {
         println!(
             "entropy-coded chunks: {chunks}; {} re-encode to their bytes at once, {repaired} after \

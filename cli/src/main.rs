@@ -75,7 +75,9 @@ enum Cmd {
         /// Change the residual mode when re-encoding a .dlgs (intra, sequential, parallel);
         /// residual GOPs then carry explicit residuals (RDLT, see --residual-error). For a
         /// frame sequence the default is sequential with fitted residual fields (RNTC; see
-        /// --explicit-residuals).
+        /// --explicit-residuals). For a HAC (Scaffold-GS) run the default is sequential when
+        /// every GOP after the first has the reference's NTC residual (RNTC); intra writes
+        /// full anchors in every GOP.
         #[arg(long)]
         residual_mode: Option<String>,
         #[command(flatten)]
@@ -255,7 +257,13 @@ fn main() -> Result<()> {
                     &sequence,
                 )
             } else if let Some(dirs) = hac_ingest_cmd::hac_gops(&input) {
-                hac_ingest_cmd::run_hac_ingest(&dirs, &output, fps, codec.exact_features)
+                hac_ingest_cmd::run_hac_ingest(
+                    &dirs,
+                    &output,
+                    fps,
+                    codec.exact_features,
+                    residual_mode.as_deref(),
+                )
             } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)
             } else if let [one] = input.as_slice() {

@@ -34,11 +34,20 @@ fn a_hac_run_encodes_renders_and_culls() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(text.contains("1845 static + 555 dynamic anchors"), "{text}");
+    // GOP 1 is the reference's NTC residual (format 1.17), its view MLPs inherited.
+    assert!(
+        text.contains("GOP 1: RNTC residual, AMLP inherited"),
+        "{text}"
+    );
     let o = run(&["info", out.to_str().unwrap()]);
     let info = String::from_utf8_lossy(&o.stdout);
     assert!(info.contains("variant Scaffold"), "{info}");
     assert!(
         info.contains("ANCR") && info.contains("AMLP") && info.contains("ADEF"),
+        "{info}"
+    );
+    assert!(
+        info.contains("residuals Sequential") && info.contains("RNTC"),
         "{info}"
     );
     let cams = fixture().join("reference_decode/cameras.json");

@@ -1,6 +1,8 @@
-//! The Scaffold-GS parsers (ANCR, AMLP, ADEF) directly against a fixed variant-1 scene header,
-//! and whole Scaffold-GS files through the random-access decoder; what decodes is turned into
-//! a frame (anchor deformation and neural Gaussians), so the arithmetic meets arbitrary values.
+//! The Scaffold-GS parsers (ANCR, AMLP, ADEF; since 1.17 RNTC over anchor groups and
+//! language-only AMLP) directly against a fixed variant-1 scene header, and whole Scaffold-GS
+//! files through the random-access decoder (every GOP, so residual chains too); what decodes is
+//! turned into a frame (anchor deformation and neural Gaussians) or applied to anchors, so the
+//! arithmetic meets arbitrary values.
 #![no_main]
 use dlgs::model::scaffold::{ScaffoldCanonical, ScaffoldMlps};
 use dlgs_decoder::scaffold::{neural_gaussians, ScaffoldDecoder, ViewRequest};
@@ -43,10 +45,23 @@ fuzz_target!(|data: &[u8]| {
         0 => {
             if let Ok(c) = dlgs::chunks::ancr::decode(body, 0, &s, &limits) {
                 let _ = dlgs_decoder::scaffold::anchor_reach(&c.statics);
+            } else if let Ok(f) = dlgs::chunks::rntc::decode(body, 0, &s, &limits) {
+                // An anchor residual (§6.6.1), applied to anchors inside and outside its box.
+                let mut c = ScaffoldCanonical::default();
+                for set in [&mut c.statics, &mut c.dynamics] {
+                    set.positions = vec![f.bound_min, [0.5; 3], [1e30, 0.0, -1e30]];
+                    set.features = vec![0.5; 150];
+                    set.offsets = vec![0.1; 90];
+                    set.log_scalings = vec![-2.0; 18];
+                }
+                let _ = c.with_residual(&f);
             }
         }
         1 => {
-            if let Ok(m) = dlgs::chunks::amlp::decode(body, 0, &s, &limits) {
+            let base = dlgs::chunks::amlp::decode(body, 0, &s, &limits).ok();
+            let any = dlgs::chunks::amlp::decode_any(body, 0, &s, &limits).ok();
+            let resolved = any.and_then(|a| a.resolve(base.as_ref()));
+            if let Some(m) = base.or(resolved) {
                 let mut c = ScaffoldCanonical::default();
                 for set in [&mut c.statics, &mut c.dynamics] {
                     set.positions = vec![[0.1, 0.2, 0.3]];
@@ -72,6 +87,13 @@ fuzz_target!(|data: &[u8]| {
             if let Ok(mut dec) = ScaffoldDecoder::new(std::io::Cursor::new(body), limits) {
                 let _ = dec.frame_at(0.0, &view());
                 let _ = dec.frame_in_view(0.0, [0.0; 3], false, &|p, _| vec![true; p.len()]);
+                let gops = dec.scene().gop_count.min(4);
+                for g in (0..gops).rev() {
+                    let _ = dec.canonical(g);
+                }
+                if gops > 1 {
+                    let _ = dec.frame_at(2.0, &view());
+                }
             }
         }
     }

@@ -10,7 +10,7 @@ use crate::container::{ChunkType, SceneHeader};
 use crate::entropy::binary_bits;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
-use crate::model::ntc::{NtcConfig, NtcField, NtcMlp};
+use crate::model::ntc::{NtcConfig, NtcField, NtcMlp, RowLayout};
 
 /// Largest plane level count, log2 table size and feature count a reader accepts (bounds the
 /// work a file can ask for: at most 3 * 8 * 2^20 * 8 bits).
@@ -130,7 +130,7 @@ fn best_coding(segs: &[&BitSlice<u64, Lsb0>], ones: &[u64]) -> (FrequencyScope, 
 
 /// Encode a field. The weights are stored as f32, zstd-compressed.
 pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<u8>> {
-    f.validate(scene.sh_degree, scene.lang_width())
+    f.validate_layout(RowLayout::of(scene))
         .map_err(|e| Error::input(format!("RNTC: {e}")))?;
     let c = &f.config;
     if c.levels() > MAX_LEVELS
@@ -311,10 +311,11 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
             Ok(bits)
         })
         .collect::<Result<_>>()?;
-    // The output width follows from the groups: check it before sizing the weights.
-    let width: usize = crate::model::ntc::groups_in(groups)
-        .map(|g| g.width(scene.sh_degree, scene.lang_width()))
-        .sum();
+    // The output width follows from the groups (of Gaussians or, in a Scaffold-GS scene, of
+    // anchors): check it before sizing the weights.
+    let width = RowLayout::of(scene)
+        .row_width(groups)
+        .map_err(|e| Error::payload(ChunkType::RNTC, e, offset))?;
     if outputs != width {
         return Err(Error::payload(
             ChunkType::RNTC,
@@ -353,7 +354,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         sets,
     };
     field
-        .validate(scene.sh_degree, scene.lang_width())
+        .validate_layout(RowLayout::of(scene))
         .map_err(|e| Error::payload(ChunkType::RNTC, e, offset))?;
     Ok(field)
 }

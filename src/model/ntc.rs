@@ -38,6 +38,63 @@ pub struct NtcField {
     pub sets: u8,
 }
 
+/// What a residual row's group mask names (§6.6.1): the attribute groups of a 3DGS scene's
+/// Gaussians (`HEAD.variant` 0) or of a Scaffold-GS scene's anchors (variant 1, since 1.17).
+/// The grids, lookup, gate and MLP are the same for both; only the row's columns differ.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowLayout {
+    Gaussians { sh_degree: u8, lang_width: usize },
+    Anchors,
+}
+
+impl RowLayout {
+    /// The layout of a scene's residual rows.
+    pub fn of(scene: &crate::container::SceneHeader) -> Self {
+        match scene.variant {
+            crate::container::Variant::Scaffold => RowLayout::Anchors,
+            crate::container::Variant::Gaussians3d => RowLayout::Gaussians {
+                sh_degree: scene.sh_degree,
+                lang_width: scene.lang_width(),
+            },
+        }
+    }
+
+    /// Width of the row `mask` selects, or why the mask is invalid in this layout (a group of
+    /// width 0 here, an undefined bit, or no group at all).
+    pub fn row_width(self, mask: u8) -> std::result::Result<usize, String> {
+        let width = match self {
+            RowLayout::Gaussians {
+                sh_degree,
+                lang_width,
+            } => {
+                let mut width = 0;
+                for g in groups_in(mask) {
+                    let w = g.width(sh_degree, lang_width);
+                    if w == 0 {
+                        return Err(format!("group {} does not exist in this scene", g.name()));
+                    }
+                    width += w;
+                }
+                width
+            }
+            RowLayout::Anchors => {
+                use crate::model::scaffold::AnchorGroup;
+                if mask & !AnchorGroup::MASK != 0 {
+                    return Err(format!(
+                        "group mask {mask:#x}: an anchor residual has groups feature, offsets \
+                         and log_scaling only (bits 0-2)"
+                    ));
+                }
+                AnchorGroup::selected(mask).map(AnchorGroup::width).sum()
+            }
+        };
+        if width == 0 {
+            return Err("the residual changes no attribute".into());
+        }
+        Ok(width)
+    }
+}
+
 /// The groups a mask selects, ascending.
 pub fn groups_in(mask: u8) -> impl Iterator<Item = AttrGroup> {
     AttrGroup::ALL
@@ -124,8 +181,17 @@ fn gate_value(t: &Tables, c: &NtcConfig, u: [f32; 3]) -> f32 {
 }
 
 impl NtcField {
-    /// Structural checks (also run on decode): shapes, bounds, groups present in the scene.
+    /// Structural checks (also run on decode): shapes, bounds, groups present in the scene
+    /// (a 3DGS scene with this SH degree and language width).
     pub fn validate(&self, sh_degree: u8, lang_width: usize) -> std::result::Result<(), String> {
+        self.validate_layout(RowLayout::Gaussians {
+            sh_degree,
+            lang_width,
+        })
+    }
+
+    /// As [`Self::validate`], for residual rows of `layout`.
+    pub fn validate_layout(&self, layout: RowLayout) -> std::result::Result<(), String> {
         let c = &self.config;
         if c.resolutions.is_empty() || c.resolutions.len() > 16 {
             return Err(format!("{} plane levels (1..=16)", c.resolutions.len()));
@@ -156,17 +222,7 @@ impl NtcField {
         if self.sets == 0 || self.sets & !(SET_STATIC | SET_DYNAMIC) != 0 {
             return Err(format!("set mask {:#x}", self.sets));
         }
-        let mut width = 0;
-        for g in groups_in(self.groups) {
-            let w = g.width(sh_degree, lang_width);
-            if w == 0 {
-                return Err(format!("group {} does not exist in this scene", g.name()));
-            }
-            width += w;
-        }
-        if width == 0 {
-            return Err("the residual changes no attribute".into());
-        }
+        let width = layout.row_width(self.groups)?;
         self.mlp.check()?;
         if self.mlp.inputs != c.input_width() || self.mlp.outputs != width {
             return Err(format!(

@@ -66,6 +66,61 @@ impl Anchors {
     }
 }
 
+/// One attribute group of an anchor, in the order an `RNTC` residual row of a Scaffold-GS
+/// scene uses (format-spec §6.6.1, since 1.17). Positions are not a group: the field is
+/// evaluated at them, and every GOP of a residual chain keeps GOP 0's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum AnchorGroup {
+    /// The 50-value feature.
+    Feature = 0,
+    /// The 10 offsets, x, y, z each, as `ANCR` stores them.
+    Offsets = 1,
+    /// The 6 log-scalings.
+    LogScaling = 2,
+}
+
+impl AnchorGroup {
+    pub const ALL: [AnchorGroup; 3] = [
+        AnchorGroup::Feature,
+        AnchorGroup::Offsets,
+        AnchorGroup::LogScaling,
+    ];
+    /// The mask bits an anchor residual may set.
+    pub const MASK: u8 = 0b111;
+
+    pub fn bit(self) -> u8 {
+        1 << self as u8
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            AnchorGroup::Feature => "feature",
+            AnchorGroup::Offsets => "offsets",
+            AnchorGroup::LogScaling => "log_scaling",
+        }
+    }
+    pub fn width(self) -> usize {
+        match self {
+            AnchorGroup::Feature => FEAT_DIM,
+            AnchorGroup::Offsets => 3 * N_OFFSETS,
+            AnchorGroup::LogScaling => SCALING_DIM,
+        }
+    }
+    /// The groups a mask selects, ascending (undefined bits are skipped).
+    pub fn selected(mask: u8) -> impl Iterator<Item = AnchorGroup> {
+        Self::ALL.into_iter().filter(move |g| mask & g.bit() != 0)
+    }
+    /// The group's values of anchor `i`.
+    pub fn values_mut(self, a: &mut Anchors, i: usize) -> &mut [f32] {
+        let w = self.width();
+        let v = match self {
+            AnchorGroup::Feature => &mut a.features,
+            AnchorGroup::Offsets => &mut a.offsets,
+            AnchorGroup::LogScaling => &mut a.log_scalings,
+        };
+        &mut v[i * w..(i + 1) * w]
+    }
+}
+
 /// What follows a dense layer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Activation {
@@ -237,8 +292,9 @@ pub struct AnchorDeformation {
 }
 
 /// What a Scaffold-GS scene header must say (format-spec §6.12): SH degree 0 (colours come
-/// from the colour MLP), intra GOPs, the plain deformation model (lerp), 16 time channels iff
-/// there are dynamic anchors, and language of 3 levels x 3 dims or none.
+/// from the colour MLP), intra or sequential GOPs (since 1.17; parallel is refused), the plain
+/// deformation model (lerp), 16 time channels iff there are dynamic anchors, and language of 3
+/// levels x 3 dims or none.
 pub fn check_scene(s: &crate::container::SceneHeader) -> Result<(), String> {
     use crate::container::header::{DeformModel, ResidualMode};
     if s.sh_degree != 0 {
@@ -247,8 +303,11 @@ pub fn check_scene(s: &crate::container::SceneHeader) -> Result<(), String> {
             s.sh_degree
         ));
     }
-    if s.residual_mode != ResidualMode::Intra {
-        return Err("Scaffold-GS scenes are intra (residual_mode 0) in this version".into());
+    if s.residual_mode == ResidualMode::Parallel {
+        return Err(
+            "Scaffold-GS scenes are intra or sequential (residual_mode 0 or 1), not parallel"
+                .into(),
+        );
     }
     if s.deform_model != DeformModel::PaperLerp {
         return Err("Scaffold-GS scenes use deform_model 1 (lerp of time features)".into());
@@ -273,4 +332,42 @@ pub fn check_scene(s: &crate::container::SceneHeader) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+impl ScaffoldCanonical {
+    /// The canonical anchors `field` (an `RNTC` of a Scaffold-GS scene) makes of this reference
+    /// state (format-spec §6.6.5, §6.12): each selected set's rows are evaluated at the
+    /// reference's canonical positions and added, f32, to the selected groups; positions and
+    /// everything not selected are copied. The result is the same on any thread count.
+    pub fn with_residual(
+        &self,
+        field: &crate::model::ntc::NtcField,
+    ) -> std::result::Result<ScaffoldCanonical, String> {
+        use crate::model::ntc::RowLayout;
+        use crate::model::residual::{SET_DYNAMIC, SET_STATIC};
+        field.validate_layout(RowLayout::Anchors)?;
+        self.statics.check_shapes()?;
+        self.dynamics.check_shapes()?;
+        let mut out = self.clone();
+        let no = field.mlp.outputs;
+        for (set, bit) in [
+            (&mut out.statics, SET_STATIC),
+            (&mut out.dynamics, SET_DYNAMIC),
+        ] {
+            if field.sets & bit == 0 {
+                continue;
+            }
+            let rows = field.residuals_at(&set.positions);
+            for i in 0..set.len() {
+                let mut row = &rows[i * no..(i + 1) * no];
+                for g in AnchorGroup::selected(field.groups) {
+                    let v = g.values_mut(set, i);
+                    let (d, rest) = row.split_at(v.len());
+                    v.iter_mut().zip(d).for_each(|(x, d)| *x += d);
+                    row = rest;
+                }
+            }
+        }
+        Ok(out)
+    }
 }

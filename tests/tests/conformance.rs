@@ -208,12 +208,19 @@ fn scaffold_vectors_decode_to_their_frames_and_errors() {
         match v.error {
             None => {
                 let (_, want) = vector_and_values(v.name, "frames");
-                assert_eq!(vectors::scaffold::frames(&bytes), want, "{}", v.name);
+                assert_eq!(
+                    vectors::scaffold::frames(v.name, &bytes),
+                    want,
+                    "{}",
+                    v.name
+                );
                 assert!(want[0] > 0.0, "frames with children");
             }
             Some(e) => {
                 let got = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default())
-                    .and_then(|mut d| d.gop(0).map(|_| ()))
+                    .and_then(|mut d| {
+                        (0..d.scene().gop_count).try_for_each(|g| d.gop(g).map(|_| ()))
+                    })
                     .expect_err(v.name);
                 assert_eq!(got.name(), e, "{}: {got}", v.name);
                 assert_eq!(row[1], e);

@@ -1,11 +1,13 @@
 //! Random-access decoding of Scaffold-GS files (`HEAD.variant = 1`; format-spec §6.9-§6.12):
-//! a GOP's anchors (`ANCR`), view MLPs (`AMLP`) and, with dynamic anchors, their time features
-//! (`TFEA`) and deformation (`ADEF`); a frame is the neural Gaussians one camera sees at a time.
+//! a GOP's anchors (`ANCR`, or in a sequential scene from GOP 1 on an `RNTC` residual against
+//! the previous GOP's decoded anchors), view MLPs (`AMLP`, inherited along the chain when a
+//! residual GOP omits it) and, with dynamic anchors, their time features (`TFEA`) and
+//! deformation (`ADEF`); a frame is the neural Gaussians one camera sees at a time.
 
 use std::io::{Read, Seek};
 use std::sync::Arc;
 
-use dlgs::chunks::{adef, amlp, ancr};
+use dlgs::chunks::{adef, amlp, ancr, rntc};
 use dlgs::container::header::Variant;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::scaffold::{AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps};
@@ -24,16 +26,37 @@ pub struct ScaffoldGop {
     pub mlps: ScaffoldMlps,
     /// With dynamic anchors: their deformation and key time features.
     pub dynamic: Option<(AnchorDeformation, TimeFeatures)>,
+    /// What does not change with the time, computed once per GOP: every anchor's canonical
+    /// position (static, then dynamic) and the static anchors' reach.
+    positions: Vec<[f32; 3]>,
+    static_reach: Vec<f32>,
 }
 
 impl ScaffoldGop {
+    /// A GOP from its parts (the per-GOP caches are computed here).
+    pub fn new(
+        index: u32,
+        canonical: ScaffoldCanonical,
+        mlps: ScaffoldMlps,
+        dynamic: Option<(AnchorDeformation, TimeFeatures)>,
+    ) -> Self {
+        let mut positions = canonical.statics.positions.clone();
+        positions.extend_from_slice(&canonical.dynamics.positions);
+        let static_reach = super::anchor_reach(&canonical.statics);
+        ScaffoldGop {
+            index,
+            canonical,
+            mlps,
+            dynamic,
+            positions,
+            static_reach,
+        }
+    }
+
     /// Every anchor at key pair (`key`, `key + 1`), fraction `delta`: static anchors as stored,
     /// dynamic ones deformed (§6.12). Returns (pre-deformation positions, state).
-    pub fn anchors_at(&self, key: usize, delta: f32) -> (Vec<[f32; 3]>, Anchors) {
+    pub fn anchors_at(&self, key: usize, delta: f32) -> (&[[f32; 3]], Anchors) {
         let c = &self.canonical;
-        let mut view = c.statics.positions.clone();
-        view.extend_from_slice(&c.dynamics.positions);
-        let mut state = c.statics.clone();
         let moved;
         let dynamics = match &self.dynamic {
             Some((d, f)) => {
@@ -49,21 +72,58 @@ impl ScaffoldGop {
             }
             None => &c.dynamics,
         };
-        state.positions.extend_from_slice(&dynamics.positions);
-        state.features.extend_from_slice(&dynamics.features);
-        state.offsets.extend_from_slice(&dynamics.offsets);
-        state.log_scalings.extend_from_slice(&dynamics.log_scalings);
-        (view, state)
+        // One allocation per attribute, sized for both sets.
+        let join = |a: &[f32], b: &[f32]| {
+            let mut v = Vec::with_capacity(a.len() + b.len());
+            v.extend_from_slice(a);
+            v.extend_from_slice(b);
+            v
+        };
+        let mut positions = Vec::with_capacity(self.positions.len());
+        positions.extend_from_slice(&c.statics.positions);
+        positions.extend_from_slice(&dynamics.positions);
+        let state = Anchors {
+            positions,
+            features: join(&c.statics.features, &dynamics.features),
+            offsets: join(&c.statics.offsets, &dynamics.offsets),
+            log_scalings: join(&c.statics.log_scalings, &dynamics.log_scalings),
+        };
+        (&self.positions, state)
+    }
+
+    /// How far each anchor of `state` (from [`Self::anchors_at`]) can reach
+    /// ([`super::anchor_reach`]); the static anchors' is computed once per GOP.
+    pub fn reach(&self, state: &Anchors) -> Vec<f32> {
+        let ns = self.static_reach.len();
+        let mut r = Vec::with_capacity(state.len());
+        r.extend_from_slice(&self.static_reach);
+        r.extend(super::neural::anchor_reach_range(state, ns..state.len()));
+        r
     }
 }
 
 /// A view test: given every anchor's position and reach, which anchors to decode.
 pub type InView<'a> = dyn Fn(&[[f32; 3]], &[f32]) -> Vec<bool> + 'a;
 
+/// What a residual GOP needs of its reference GOP: the decoded canonical anchors and the view
+/// MLPs in force (format-spec §6.10, §6.12).
+#[derive(Debug)]
+struct GopState {
+    canonical: ScaffoldCanonical,
+    mlps: ScaffoldMlps,
+}
+
+/// Decoded GOP states kept for residual chains (GOP 0's preferentially), so sequential
+/// playback decodes each GOP's residual once and a seek walks the chain from the nearest state
+/// held (bounded memory: at most this many states).
+const STATE_CACHE: usize = 3;
+
 /// Decodes GOPs and camera-dependent frames from a seekable Scaffold-GS `.dlgs` source.
 pub struct ScaffoldDecoder<R: Read + Seek> {
     reader: FileReader<R>,
     last: Option<Arc<ScaffoldGop>>,
+    /// Most recently used last.
+    states: Vec<(u32, Arc<GopState>)>,
     hevc: Option<SharedKeyPictureDecoder>,
 }
 
@@ -84,6 +144,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         Ok(ScaffoldDecoder {
             reader,
             last: None,
+            states: Vec::new(),
             hevc: hevc::default_decoder(),
         })
     }
@@ -94,15 +155,22 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         self.last = None;
     }
 
+    /// GOP `g`'s canonical anchors (after its residual chain) without its deformation.
+    pub fn canonical(&mut self, g: u32) -> Result<ScaffoldCanonical> {
+        Ok(self.state(g)?.canonical.clone())
+    }
+
     pub fn scene(&self) -> &SceneHeader {
         self.reader.scene()
     }
 
-    /// GOP `g`, decoded (the last one is kept for the next call).
+    /// GOP `g`, decoded (the last one is kept for the next call). In a sequential scene this
+    /// decodes the residual chain from the nearest GOP state held (GOP 0 at worst).
     pub fn gop(&mut self, g: u32) -> Result<Arc<ScaffoldGop>> {
         if let Some(last) = self.last.as_ref().filter(|l| l.index == g) {
             return Ok(last.clone());
         }
+        let state = self.state(g)?;
         let scene = self.reader.scene().clone();
         let limits = self.reader.limits().fresh();
         let at = self.reader.gop_entry(g)?.offset;
@@ -112,11 +180,6 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
                 .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), at))?;
             Ok((self.reader.payload(&c)?, c.payload_offset()))
         };
-        let (p, o) = read(ChunkType::ANCR)?;
-        let canonical =
-            ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?;
-        let (p, o) = read(ChunkType::AMLP)?;
-        let mlps = amlp::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AMLP))?;
         let dynamic = if scene.n_dynamic > 0 {
             let (p, o) = read(ChunkType::ADEF)?;
             let d = adef::decode(&p, o, &limits).map_err(|e| e.in_chunk(ChunkType::ADEF))?;
@@ -128,14 +191,108 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         } else {
             None
         };
-        let gop = Arc::new(ScaffoldGop {
-            index: g,
-            canonical,
-            mlps,
+        let gop = Arc::new(ScaffoldGop::new(
+            g,
+            state.canonical.clone(),
+            state.mlps.clone(),
             dynamic,
-        });
+        ));
         self.last = Some(gop.clone());
         Ok(gop)
+    }
+
+    /// The canonical anchors and view MLPs of GOP `g`: from the cache, or decoded from the
+    /// nearest state held along `g`'s reference chain.
+    fn state(&mut self, g: u32) -> Result<Arc<GopState>> {
+        // Walk back to a GOP whose state is held or that has no reference GOP.
+        let mut chain = Vec::new();
+        let mut h = g;
+        let mut base = loop {
+            if let Some(i) = self.states.iter().position(|(k, _)| *k == h) {
+                let hit = self.states.remove(i);
+                let st = hit.1.clone();
+                self.states.push(hit);
+                break Some(st);
+            }
+            let r = self.reader.gop_entry(h)?.header.reference_gop;
+            chain.push((h, r));
+            if r == dlgs::container::gop::NO_REFERENCE {
+                break None;
+            }
+            if r >= h {
+                // GIDX/GOPH validation makes a reference earlier; never loop on a bad file.
+                return Err(Error::format(
+                    FormatErrorKind::Index("a GOP's reference GOP must come before it"),
+                    self.reader.gop_entry(h)?.offset,
+                ));
+            }
+            h = r;
+        };
+        for &(h, _) in chain.iter().rev() {
+            let st = Arc::new(self.decode_state(h, base.as_deref())?);
+            self.remember(h, st.clone());
+            base = Some(st);
+        }
+        Ok(base.expect("the chain ends at a decoded state"))
+    }
+
+    fn remember(&mut self, g: u32, st: Arc<GopState>) {
+        if self.states.len() >= STATE_CACHE {
+            // Evict the least recently used state, GOP 0's last.
+            let i = self.states.iter().position(|(k, _)| *k != 0).unwrap_or(0);
+            self.states.remove(i);
+        }
+        self.states.push((g, st));
+    }
+
+    /// Decode GOP `g`'s canonical anchors and view MLPs; `reference` is its reference GOP's
+    /// state (`None` for an intra GOP).
+    fn decode_state(&mut self, g: u32, reference: Option<&GopState>) -> Result<GopState> {
+        let scene = self.reader.scene().clone();
+        let limits = self.reader.limits().fresh();
+        let at = self.reader.gop_entry(g)?.offset;
+        let chunks = self.reader.gop_chunks(g)?;
+        let mut read = |ty: ChunkType| -> Result<(Vec<u8>, u64)> {
+            let c = find(&chunks, ty)
+                .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), at))?;
+            Ok((self.reader.payload(&c)?, c.payload_offset()))
+        };
+        let Some(reference) = reference else {
+            let (p, o) = read(ChunkType::ANCR)?;
+            let canonical =
+                ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?;
+            let (p, o) = read(ChunkType::AMLP)?;
+            let mlps =
+                amlp::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AMLP))?;
+            return Ok(GopState { canonical, mlps });
+        };
+        // A residual GOP (§6.12): an RNTC over anchor groups, no canonical chunk.
+        if let Some(c) = find(&chunks, ChunkType::ANCR) {
+            return Err(Error::format(
+                FormatErrorKind::Order("a residual Scaffold-GS GOP holds RNTC, not ANCR"),
+                c.offset,
+            ));
+        }
+        let (p, o) = read(ChunkType::RNTC)?;
+        let canonical = rntc::decode(&p, o, &scene, &limits)
+            .and_then(|field| {
+                reference
+                    .canonical
+                    .with_residual(&field)
+                    .map_err(|e| Error::payload(ChunkType::RNTC, e, o))
+            })
+            .map_err(|e| e.in_chunk(ChunkType::RNTC))?;
+        let mlps = match find(&chunks, ChunkType::AMLP) {
+            None => reference.mlps.clone(),
+            Some(_) => {
+                let (p, o) = read(ChunkType::AMLP)?;
+                amlp::decode_any(&p, o, &scene, &limits)
+                    .map_err(|e| e.in_chunk(ChunkType::AMLP))?
+                    .resolve(Some(&reference.mlps))
+                    .expect("a reference is given")
+            }
+        };
+        Ok(GopState { canonical, mlps })
     }
 
     /// The neural Gaussians `view` sees at time `t` seconds (between frames too).
@@ -143,7 +300,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let tp = self.scene().locate(t)?;
         let gop = self.gop(tp.gop)?;
         let (positions, state) = gop.anchors_at(tp.key, tp.delta);
-        Ok(neural_gaussians(&positions, &state, &gop.mlps, view))
+        Ok(neural_gaussians(positions, &state, &gop.mlps, view))
     }
 
     /// As [`Self::frame_at`], decoding only the anchors `in_view(positions, reach)` keeps: it
@@ -159,7 +316,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let tp = self.scene().locate(t)?;
         let gop = self.gop(tp.gop)?;
         let (positions, state) = gop.anchors_at(tp.key, tp.delta);
-        let visible = in_view(&state.positions, &super::anchor_reach(&state));
+        let visible = in_view(&state.positions, &gop.reach(&state));
         if visible.len() != state.len() {
             return Err(Error::request("the view test must answer once per anchor"));
         }
@@ -169,6 +326,6 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
             language,
             visible: Some(&visible),
         };
-        Ok((neural_gaussians(&positions, &state, &gop.mlps, &view), kept))
+        Ok((neural_gaussians(positions, &state, &gop.mlps, &view), kept))
     }
 }

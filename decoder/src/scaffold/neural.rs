@@ -223,7 +223,12 @@ impl NeuralGaussians {
 /// deviations, so culling anchors by these spheres against a view frustum (widened by the
 /// renderer's dilation) drops no child the view shows.
 pub fn anchor_reach(anchors: &Anchors) -> Vec<f32> {
-    (0..anchors.len())
+    anchor_reach_range(anchors, 0..anchors.len())
+}
+
+/// [`anchor_reach`] of the anchors in `range` only.
+pub(crate) fn anchor_reach_range(anchors: &Anchors, range: std::ops::Range<usize>) -> Vec<f32> {
+    range
         .map(|a| {
             let s = anchors.log_scaling(a);
             let e: [f32; 6] = std::array::from_fn(|d| exp(s[d] as f64) as f32);

@@ -93,3 +93,57 @@ pub fn residuals(
     }
     (d_feat, d_off)
 }
+
+/// The NTC residual of a GOP as an `RNTC` field over anchor groups (format-spec §6.6, variant 1,
+/// since 1.17): the grid bits as the reference stores them (`ntc_2D.b` = xy ‖ xz ‖ yz, each
+/// level-major with 2^15 entries of 4 bits, so split by level; `ntc_3D.b` the gate), `ntc_mlp`
+/// with outputs `d_feat` ‖ `d_offsets` (groups feature and offsets), every anchor (both
+/// sets), and the box the reference normalises by (the anchors' `x_bound_min/max`).
+/// `None` if the bit counts or the MLP's shape are not the reference's.
+pub fn to_field(
+    plane_bits: &[bool],
+    gate_bits: &[bool],
+    mlp: &TwoLayer,
+    bound_min: [f32; 3],
+    bound_max: [f32; 3],
+) -> Option<dlgs::model::ntc::NtcField> {
+    use bitvec::prelude::*;
+    use dlgs::model::ntc::{NtcConfig, NtcField, NtcMlp};
+    use dlgs::model::residual::{SET_DYNAMIC, SET_STATIC};
+    use dlgs::model::scaffold::AnchorGroup;
+    let config = NtcConfig {
+        resolutions: PLANE_RES.to_vec(),
+        features: PLANE_FEATURES as u8,
+        log2_table: PLANE_LOG2 as u8,
+        gate_resolution: GATE_RES[0],
+        gate_log2_table: GATE_LOG2 as u8,
+    };
+    let level = config.level_bits();
+    if plane_bits.len() != 3 * PLANE_RES.len() * level || gate_bits.len() != config.gate_table() {
+        return None;
+    }
+    mlp.check("ntc_mlp", NTC_IN, NTC_OUT, true).ok()?;
+    let bits = |b: &[bool]| b.iter().copied().collect::<BitVec<u64, Lsb0>>();
+    let field = NtcField {
+        planes: plane_bits.chunks_exact(level).map(bits).collect(),
+        gate: bits(gate_bits),
+        mlp: NtcMlp {
+            inputs: NTC_IN,
+            hidden: mlp.first.outputs,
+            outputs: NTC_OUT,
+            w1: mlp.first.weights.clone(),
+            b1: mlp.first.bias.clone()?,
+            w2: mlp.second.weights.clone(),
+            b2: mlp.second.bias.clone()?,
+        },
+        config,
+        bound_min,
+        bound_max,
+        groups: AnchorGroup::Feature.bit() | AnchorGroup::Offsets.bit(),
+        sets: SET_STATIC | SET_DYNAMIC,
+    };
+    field
+        .validate_layout(dlgs::model::ntc::RowLayout::Anchors)
+        .ok()?;
+    Some(field)
+}

@@ -98,7 +98,7 @@ language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened
         };
         std::fs::write(root.join(dir).join(format!("{}.dlgs", v.name)), &v.bytes).unwrap();
         if v.error.is_none() {
-            let frames: Vec<u8> = dlgs_tests::vectors::scaffold::frames(&v.bytes)
+            let frames: Vec<u8> = dlgs_tests::vectors::scaffold::frames(v.name, &v.bytes)
                 .iter()
                 .flat_map(|x| x.to_le_bytes())
                 .collect();
@@ -124,10 +124,13 @@ language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened
 for the camera centre {cam:?}, language decoded: per time, the number of neural Gaussians (as an f32), then for \
 each, in anchor then offset order, position (3), scale (3), unit quaternion w x y z (4), RGB (3), colour opacity (1), \
 language opacity (1), language (9); f32 little-endian. A decoder conforms if the counts are equal and every value \
-is within 2e-4 (absolute); the reference decoder reproduces every value bit for bit on every platform.\n",
+is within 2e-4 (absolute); the reference decoder reproduces every value bit for bit on every platform. \
+`valid/{res}.frames.f32` (since 1.17) is the same at t = {rtimes:?} s, all in its residual GOP 1.\n",
         name = dlgs_tests::vectors::scaffold::VALID,
         times = dlgs_tests::vectors::scaffold::TIMES,
         cam = dlgs_tests::vectors::scaffold::CAMERA,
+        res = dlgs_tests::vectors::scaffold::RESIDUAL,
+        rtimes = dlgs_tests::vectors::scaffold::RESIDUAL_TIMES,
     ));
     std::fs::write(root.join("README.md"), readme).unwrap();
     println!("wrote {}", root.display());

@@ -2,6 +2,8 @@
 //! anchors sit at the 3 real points of the tiny scene (their features, offsets, scalings, MLP
 //! weights and time features are generated from a fixed seed: no trained model exists here),
 //! its frames for listed times and a camera, and damaged copies with the error a reader gives.
+//! Since 1.17 also a 2-GOP sequential file whose GOP 1 is an `RNTC` over anchor groups with a
+//! language-only `AMLP`.
 
 use dlgs::chunks::tfea::TfeaBody;
 use dlgs::container::chunk::encode_header;
@@ -11,13 +13,17 @@ use dlgs::model::scaffold::{
 };
 use dlgs::model::TimeFeatures;
 use dlgs_decoder::scaffold::{ScaffoldDecoder, ViewRequest};
-use dlgs_encoder::scaffold::{scaffold_scene, ScaffoldWriter};
+use dlgs_encoder::scaffold::{scaffold_scene, ResidualViewMlps, ScaffoldWriter};
 
 use super::Vector;
 
 pub const VALID: &str = "scaffold-tiny";
+/// The residual vector (since 1.17).
+pub const RESIDUAL: &str = "scaffold-tiny-residual";
 /// Times (s) and camera centre of the listed frames.
 pub const TIMES: [f64; 3] = [0.0, 0.85, 1.95];
+/// Times of the residual vector's listed frames: all in its GOP 1.
+pub const RESIDUAL_TIMES: [f64; 3] = [2.0, 2.85, 3.95];
 pub const CAMERA: [f32; 3] = [0.4, -0.3, -2.5];
 
 fn model() -> (
@@ -99,14 +105,89 @@ pub fn valid_bytes() -> Vec<u8> {
     w.finish().unwrap()
 }
 
+/// A small generated `RNTC` field over all three anchor groups (feature, offsets, log_scaling),
+/// both sets; random grid bits and MLP weights from a fixed seed.
+fn residual_field(lo: [f32; 3], hi: [f32; 3]) -> dlgs::model::ntc::NtcField {
+    use bitvec::prelude::*;
+    use dlgs::model::ntc::{NtcConfig, NtcField, NtcMlp};
+    let config = NtcConfig {
+        resolutions: vec![6, 12],
+        features: 2,
+        log2_table: 5,
+        gate_resolution: 5,
+        gate_log2_table: 6,
+    };
+    let mut rng = fastrand::Rng::with_seed(53);
+    let mut bits = |n: usize| (0..n).map(|_| rng.bool()).collect::<BitVec<u64, Lsb0>>();
+    let planes = (0..3 * config.levels())
+        .map(|_| bits(config.level_bits()))
+        .collect();
+    let gate = bits(config.gate_table());
+    let (i, h, o) = (
+        config.input_width(),
+        6,
+        FEAT_DIM + 3 * N_OFFSETS + SCALING_DIM,
+    );
+    let mut rng = fastrand::Rng::with_seed(54);
+    let mut w = |n: usize, s: f32| (0..n).map(|_| (rng.f32() - 0.5) * s).collect::<Vec<f32>>();
+    let mlp = NtcMlp {
+        inputs: i,
+        hidden: h,
+        outputs: o,
+        w1: w(i * h, 0.8),
+        b1: w(h, 0.2),
+        w2: w(h * o, 0.3),
+        b2: w(o, 0.05),
+    };
+    NtcField {
+        config,
+        bound_min: lo,
+        bound_max: hi,
+        planes,
+        gate,
+        mlp,
+        groups: 0b111,
+        sets: 3,
+    }
+}
+
+/// The residual vector: `scaffold-tiny`'s model as GOP 0, GOP 1 its `RNTC` residual with a
+/// language-only `AMLP` (the language MLP's output biases shifted) and the same deformation.
+pub fn residual_bytes() -> Vec<u8> {
+    let (c, m, d, f) = model();
+    let mut scene = scaffold_scene(2, 1, true, 30, 60, 10, 120);
+    scene.residual_mode = dlgs::container::ResidualMode::Sequential;
+    let mut w = ScaffoldWriter::new(Vec::new(), scene, 19).unwrap();
+    let f = TfeaBody::Exact(f);
+    w.push_gop(&c, &m, Some((&d, &f))).unwrap();
+    let mut lang = m.language.clone().unwrap();
+    for b in lang.second.bias.as_mut().unwrap() {
+        *b += 0.25;
+    }
+    let field = residual_field(d.bound_min, d.bound_max);
+    w.push_residual_gop(
+        &field,
+        ResidualViewMlps::LanguageOnly(&lang),
+        Some((&d, &f)),
+    )
+    .unwrap();
+    w.finish().unwrap()
+}
+
 /// The listed frames: per time, every child's position (3), scale (3), rotation (4), colour (3),
 /// colour opacity (1), language opacity (1) and language (9), children in anchor then offset
-/// order; preceded by the child count (as f32) so that a reader can check it first.
-pub fn frames(bytes: &[u8]) -> Vec<f32> {
+/// order; preceded by the child count (as f32) so that a reader can check it first. `name`
+/// picks the times ([`TIMES`], or [`RESIDUAL_TIMES`] for [`RESIDUAL`]).
+pub fn frames(name: &str, bytes: &[u8]) -> Vec<f32> {
     let mut dec =
         ScaffoldDecoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
     let mut out = Vec::new();
-    for t in TIMES {
+    let times = if name == RESIDUAL {
+        RESIDUAL_TIMES
+    } else {
+        TIMES
+    };
+    for t in times {
         let f = dec
             .frame_at(
                 t,
@@ -135,10 +216,8 @@ pub fn frames(bytes: &[u8]) -> Vec<f32> {
 /// valid, so a reader meets the fault in the payload itself.
 fn patch(bytes: &[u8], ty: &[u8; 4], f: impl Fn(&mut Vec<u8>)) -> Vec<u8> {
     let mut r = dlgs::container::FileReader::open(std::io::Cursor::new(bytes.to_vec())).unwrap();
-    let c = r
-        .gop_chunks(0)
-        .unwrap()
-        .into_iter()
+    let c = (0..r.scene().gop_count)
+        .flat_map(|g| r.gop_chunks(g).unwrap())
         .find(|c| &c.ty.0 == ty)
         .unwrap();
     let mut payload = r.payload(&c).unwrap();
@@ -159,8 +238,20 @@ fn patch(bytes: &[u8], ty: &[u8; 4], f: impl Fn(&mut Vec<u8>)) -> Vec<u8> {
     out
 }
 
+/// `bytes` with `HEAD`'s payload edited (same length, CRC made valid again).
+fn patch_head(bytes: &[u8], f: impl Fn(&mut [u8])) -> Vec<u8> {
+    let mut out = bytes.to_vec();
+    let len = u64::from_le_bytes(out[24..32].try_into().unwrap()) as usize;
+    let p = 12 + 24;
+    f(&mut out[p..p + len]);
+    let crc = crc32c::crc32c(&out[p..p + len]);
+    out[p + len..p + len + 4].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
 pub fn all() -> Vec<Vector> {
     let good = valid_bytes();
+    let residual = residual_bytes();
     vec![
         Vector {
             name: VALID,
@@ -185,6 +276,24 @@ pub fn all() -> Vec<Vector> {
             bytes: patch(&good, b"ADEF", |p| p[12..16].copy_from_slice(&(-1e30f32).to_le_bytes())),
             error: Some("Payload"),
             about: "scaffold-tiny with an ADEF box whose max is below its min on axis 0",
+        },
+        Vector {
+            name: RESIDUAL,
+            bytes: residual.clone(),
+            error: None,
+            about: "Scaffold-GS residual GOPs (since 1.17): scaffold-tiny's model as GOP 0, then a sequential GOP 1 with an RNTC over the anchor groups feature, offsets and log_scaling (2 plane levels R 6, 12 of 2^5 entries x 2 features, gate R 5 of 2^6, MLP 12 -> 6 -> 86, random bits and weights) and a language-only AMLP (flags 3); its GOP-1 frames in scaffold-tiny-residual.frames.f32",
+        },
+        Vector {
+            name: "x-scaffold-residual-group",
+            bytes: patch(&residual, b"RNTC", |p| p[0] = 0b1111),
+            error: Some("Payload"),
+            about: "scaffold-tiny-residual with RNTC groups 0x0f: bit 3 is no anchor group",
+        },
+        Vector {
+            name: "x-scaffold-parallel",
+            bytes: patch_head(&residual, |p| p[1] = 2),
+            error: Some("Payload"),
+            about: "scaffold-tiny-residual with HEAD residual_mode 2 (parallel), not defined for Scaffold-GS (its GOP index is the same as sequential's with 2 GOPs)",
         },
     ]
 }
