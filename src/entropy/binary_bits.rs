@@ -51,6 +51,74 @@ pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
     Some(out)
 }
 
+/// Per segment probability of a 1 bit (§6.6.3, §6.13.4): with `groups` `None` each segment's
+/// own count of ones over its own size; with `Some(g)` the counts and sizes summed over every
+/// segment of the same group label `g[i]`.
+pub fn segment_probabilities(ones: &[u64], lens: &[usize], groups: Option<&[u8]>) -> Vec<u32> {
+    match groups {
+        None => ones
+            .iter()
+            .zip(lens)
+            .map(|(&o, &n)| probability_of_one(o, n as u64))
+            .collect(),
+        Some(g) => (0..ones.len())
+            .map(|i| {
+                let same = (0..ones.len()).filter(|&j| g[j] == g[i]);
+                let o: u64 = same.clone().map(|j| ones[j]).sum();
+                let n: u64 = same.map(|j| lens[j] as u64).sum();
+                probability_of_one(o, n)
+            })
+            .collect(),
+    }
+}
+
+/// Code every segment with the probabilities of [`segment_probabilities`]; a constant segment
+/// (all 0 or all 1) codes to no words. Segments are coded in parallel.
+pub fn encode_segments(
+    segs: &[&BitSlice<u64, Lsb0>],
+    ones: &[u64],
+    groups: Option<&[u8]>,
+) -> Vec<Vec<u32>> {
+    use rayon::prelude::*;
+    let lens: Vec<usize> = segs.iter().map(|s| s.len()).collect();
+    let p = segment_probabilities(ones, &lens, groups);
+    segs.par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            if ones[i] == 0 || ones[i] == lens[i] as u64 {
+                Vec::new()
+            } else {
+                encode(s, p[i])
+            }
+        })
+        .collect()
+}
+
+/// Decode one segment of `n` bits holding `ones` 1 bits with probability `p1` (the rules of
+/// §6.6.3: constant segments have no words; the decoded count of ones must match).
+pub fn decode_segment(
+    words: &[u8],
+    n: usize,
+    ones: u64,
+    p1: u32,
+) -> std::result::Result<BitVec<u64, Lsb0>, String> {
+    if ones == 0 || ones == n as u64 {
+        return Ok(BitVec::repeat(ones != 0, n));
+    }
+    let w = words
+        .chunks_exact(4)
+        .map(|w| u32::from_le_bytes(w.try_into().expect("4 bytes")))
+        .collect();
+    let bits = decode(w, n, p1).ok_or("invalid range-coder stream")?;
+    if bits.count_ones() as u64 != ones {
+        return Err(format!(
+            "decodes to {} ones, {ones} stored",
+            bits.count_ones()
+        ));
+    }
+    Ok(bits)
+}
+
 /// Shannon bound `n * H(ones / n)` in bits.
 #[allow(clippy::disallowed_methods)] // an encoder report, not decoded data
 pub fn entropy_bits(ones: u64, n: u64) -> f64 {
