@@ -93,6 +93,7 @@ pub fn run_hac_ingest(
     output: &Path,
     fps: u32,
     exact_features: bool,
+    raw_anchors: bool,
 ) -> Result<()> {
     let limits = dlgs::Limits::default();
     let pb = bar(dirs.len() as u64, "decoding HAC bitstreams");
@@ -122,7 +123,7 @@ pub fn run_hac_ingest(
         "source": "DLGStream reference implementation output (HAC / Scaffold-GS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
-        "settings": { "exact_features": exact_features },
+        "settings": { "exact_features": exact_features, "raw_anchors": raw_anchors },
     });
     w.scene_chunk(ChunkType::META, &serde_json::to_vec(&meta)?)?;
     let pb = bar(gops.len() as u64, "writing");
@@ -179,8 +180,20 @@ pub fn run_hac_ingest(
         } else {
             None
         };
-        w.push_gop(&canonical, &mlps, body.as_ref().map(|b| (&deformation, b)))
-            .with_context(|| format!("writing GOP {g}"))?;
+        let dynamic = body.as_ref().map(|b| (&deformation, b));
+        match gop.hac_anchors().filter(|_| !raw_anchors) {
+            Some(h) => {
+                let t = std::time::Instant::now();
+                let sizes = w
+                    .push_gop_hac(&h, &mlps, dynamic)
+                    .with_context(|| format!("writing GOP {g}"))?;
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                ahac_report(dir, &h, &sizes, &canonical, ms);
+            }
+            None => w
+                .push_gop(&canonical, &mlps, dynamic)
+                .with_context(|| format!("writing GOP {g}"))?,
+        }
         pb.set_position(g as u64 + 1);
     }
     pb.finish_and_clear();
@@ -196,8 +209,7 @@ pub fn run_hac_ingest(
         bytes.len()
     );
     println!(
-        "bytes per frame: reference {:.1} (bitstreams, mp4, mlps.pth, csv), .dlgs {:.1} ({:.1} %; \
-         anchors stored raw, HAC-style coding not yet)",
+        "bytes per frame: reference {:.1} (bitstreams, mp4, mlps.pth, csv), .dlgs {:.1} ({:.1} %)",
         reference as f64 / frames,
         bytes.len() as f64 / frames,
         100.0 * bytes.len() as f64 / reference.max(1) as f64
@@ -217,4 +229,90 @@ pub fn run_hac_ingest(
         );
     }
     Ok(())
+}
+
+/// Bytes of the reference's files for the anchors of one GOP: `anchor.npy`, `hash.b` and the
+/// Gaussian-coded files of each attribute (prefix `feat_`, `scaling_`, `offsets_`).
+fn reference_anchor_files(dir: &Path) -> [(String, u64); 5] {
+    let bs = dir.join("bitstreams");
+    let size = |p: PathBuf| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+    let prefixed = |pre: &str| -> u64 {
+        std::fs::read_dir(&bs)
+            .map(|it| {
+                it.filter_map(|e| e.ok())
+                    .filter(|e| e.file_name().to_string_lossy().starts_with(pre))
+                    .map(|e| e.metadata().map(|m| m.len()).unwrap_or(0))
+                    .sum()
+            })
+            .unwrap_or(0)
+    };
+    [
+        ("anchor.npy".into(), size(bs.join("anchor.npy"))),
+        ("hash.b".into(), size(bs.join("hash.b"))),
+        ("feat_*.b".into(), prefixed("feat_")),
+        ("scaling_*.b".into(), prefixed("scaling_")),
+        ("offsets_*.b".into(), prefixed("offsets_")),
+    ]
+}
+
+/// The byte table of an `AHAC` chunk against the reference's files, and the largest difference
+/// of the values we decode from the reference decoder's (the ingest's).
+fn ahac_report(
+    dir: &Path,
+    h: &dlgs::chunks::ahac::HacAnchors,
+    sizes: &dlgs::chunks::ahac::AhacSizes,
+    reference: &ScaffoldCanonical,
+    ms: f64,
+) {
+    let r = reference_anchor_files(dir);
+    // mlp_grid in mlps.pth: its float32 parameters (the share of the pickle's tensor data).
+    let mlp_ref = 4 * (h.context.w1.len() + h.context.b1.len() + h.context.w2.len() + h.context.b2.len()) as u64;
+    let rows: [(&str, u64, String); 6] = [
+        ("positions", sizes.positions as u64, format!("{} {}", r[0].0, r[0].1)),
+        ("grids", sizes.grids as u64, format!("{} {}", r[1].0, r[1].1)),
+        ("mlp_grid", sizes.mlp as u64, format!("mlps.pth share (f32 raw) {mlp_ref}")),
+        ("feature", sizes.streams[0] as u64, format!("{} {}", r[2].0, r[2].1)),
+        ("log-scaling", sizes.streams[1] as u64, format!("{} {}", r[3].0, r[3].1)),
+        ("offsets", sizes.streams[2] as u64, format!("{} {}", r[4].0, r[4].1)),
+    ];
+    let head = sizes.header + sizes.batch_headers;
+    let ours: u64 = rows.iter().map(|r| r.1).sum::<u64>() + head as u64;
+    let theirs: u64 = r.iter().map(|x| x.1).sum::<u64>() + mlp_ref;
+    println!(
+        "AHAC ({} anchors, encoded in {ms:.0} ms): part, ours, reference",
+        h.quantized.len()
+    );
+    for (name, b, rf) in &rows {
+        println!("  {name:<12} {b:>9}   {rf}");
+    }
+    println!("  {:<12} {head:>9}   (header, batch headers)", "headers");
+    println!(
+        "  {:<12} {ours:>9}   {theirs} ({:.1} %)",
+        "total",
+        100.0 * ours as f64 / theirs.max(1) as f64
+    );
+    let ours = h.canonical();
+    let diff = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max)
+    };
+    let both = |f: fn(&dlgs::model::scaffold::Anchors) -> &[f32]| {
+        diff(f(&ours.statics), f(&reference.statics))
+            .max(diff(f(&ours.dynamics), f(&reference.dynamics)))
+    };
+    println!(
+        "  max |ours - reference decoder|: feature {:e}, log-scaling {:e}, offsets {:e}, positions {:e}",
+        both(|a| &a.features),
+        both(|a| &a.log_scalings),
+        both(|a| &a.offsets),
+        {
+            let p = |a: &dlgs::model::scaffold::Anchors| -> Vec<f32> {
+                a.positions.iter().flatten().copied().collect()
+            };
+            diff(&p(&ours.statics), &p(&reference.statics))
+                .max(diff(&p(&ours.dynamics), &p(&reference.dynamics)))
+        }
+    );
 }

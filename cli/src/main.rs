@@ -254,7 +254,13 @@ fn main() -> Result<()> {
                     &sequence,
                 )
             } else if let Some(dirs) = hac_ingest_cmd::hac_gops(&input) {
-                hac_ingest_cmd::run_hac_ingest(&dirs, &output, fps, codec.exact_features)
+                hac_ingest_cmd::run_hac_ingest(
+                    &dirs,
+                    &output,
+                    fps,
+                    codec.exact_features,
+                    codec.raw_anchors,
+                )
             } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)
             } else if let [one] = input.as_slice() {

@@ -1,11 +1,12 @@
-//! Writing Scaffold-GS files (`HEAD.variant = 1`, format-spec §6.9-§6.12): per GOP its raw
-//! anchors (`ANCR`), view MLPs (`AMLP`) and, with dynamic anchors, their deformation (`ADEF`)
+//! Writing Scaffold-GS files (`HEAD.variant = 1`, format-spec §6.9-§6.13): per GOP its raw
+//! anchors (`ANCR`) or HAC-coded ones (`AHAC`), view MLPs (`AMLP`) and, with dynamic anchors, their deformation (`ADEF`)
 //! and key time features (`TFEA`, exact or 12-bit HEVC).
 
 use std::io::Write;
 
 use dlgs::chunks::tfea::{self, TfeaBody};
-use dlgs::chunks::{adef, amlp, ancr};
+use dlgs::chunks::ahac::{AhacSizes, HacAnchors};
+use dlgs::chunks::{adef, ahac, amlp, ancr};
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
 use dlgs::model::scaffold::{
@@ -80,8 +81,33 @@ impl<W: Write> ScaffoldWriter<W> {
         dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
     ) -> Result<()> {
         let s = self.writer.scene().clone();
-        mlps.check().map_err(Error::input)?;
         let anchors = ancr::encode(canonical, &s, self.zstd_level)?;
+        self.push(ChunkType::ANCR, &anchors, mlps, dynamic)
+    }
+
+    /// As [`Self::push_gop`], with the anchors HAC-coded (`AHAC`, §6.13) in place of `ANCR`.
+    /// Returns the sizes of the `AHAC` parts.
+    pub fn push_gop_hac(
+        &mut self,
+        anchors: &HacAnchors,
+        mlps: &ScaffoldMlps,
+        dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
+    ) -> Result<AhacSizes> {
+        let s = self.writer.scene().clone();
+        let (payload, sizes) = ahac::encode(anchors, &s, self.zstd_level)?;
+        self.push(ChunkType::AHAC, &payload, mlps, dynamic)?;
+        Ok(sizes)
+    }
+
+    fn push(
+        &mut self,
+        anchors_type: ChunkType,
+        anchors: &[u8],
+        mlps: &ScaffoldMlps,
+        dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
+    ) -> Result<()> {
+        let s = self.writer.scene().clone();
+        mlps.check().map_err(Error::input)?;
         let view = amlp::encode(mlps, &s, self.zstd_level)?;
         let dyn_chunks = match (s.n_dynamic > 0, dynamic) {
             (true, Some((d, f))) => {
@@ -124,7 +150,7 @@ impl<W: Write> ScaffoldWriter<W> {
         };
         self.writer.begin_gop()?;
         self.writer
-            .gop_chunk(ChunkType::ANCR, FLAG_MUST_UNDERSTAND, &anchors)?;
+            .gop_chunk(anchors_type, FLAG_MUST_UNDERSTAND, anchors)?;
         self.writer
             .gop_chunk(ChunkType::AMLP, FLAG_MUST_UNDERSTAND, &view)?;
         if let Some((d, f)) = dyn_chunks {

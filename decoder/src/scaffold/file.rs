@@ -1,11 +1,11 @@
 //! Random-access decoding of Scaffold-GS files (`HEAD.variant = 1`; format-spec §6.9-§6.12):
-//! a GOP's anchors (`ANCR`), view MLPs (`AMLP`) and, with dynamic anchors, their time features
+//! a GOP's anchors (`ANCR`, or HAC-coded `AHAC`), view MLPs (`AMLP`) and, with dynamic anchors, their time features
 //! (`TFEA`) and deformation (`ADEF`); a frame is the neural Gaussians one camera sees at a time.
 
 use std::io::{Read, Seek};
 use std::sync::Arc;
 
-use dlgs::chunks::{adef, amlp, ancr};
+use dlgs::chunks::{adef, ahac, amlp, ancr};
 use dlgs::container::header::Variant;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::scaffold::{AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps};
@@ -112,9 +112,27 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
                 .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), at))?;
             Ok((self.reader.payload(&c)?, c.payload_offset()))
         };
-        let (p, o) = read(ChunkType::ANCR)?;
-        let canonical =
-            ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?;
+        // Exactly one of ANCR (§6.9) and AHAC (§6.13).
+        let canonical = match (
+            find(&chunks, ChunkType::ANCR),
+            find(&chunks, ChunkType::AHAC),
+        ) {
+            (Some(_), Some(c)) => {
+                return Err(Error::payload(
+                    ChunkType::AHAC,
+                    "a GOP holds both ANCR and AHAC",
+                    c.payload_offset(),
+                ))
+            }
+            (None, Some(_)) => {
+                let (p, o) = read(ChunkType::AHAC)?;
+                ahac::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AHAC))?
+            }
+            _ => {
+                let (p, o) = read(ChunkType::ANCR)?;
+                ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?
+            }
+        };
         let (p, o) = read(ChunkType::AMLP)?;
         let mlps = amlp::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AMLP))?;
         let dynamic = if scene.n_dynamic > 0 {
