@@ -94,49 +94,70 @@ impl GaussModel {
         (((phi_fix(t) * span) >> 32) + j as u64) as u32
     }
 
-    /// A symbol near the mean, where the search starts (any start gives the same symbol).
+    /// Where the search for `quantile` starts (any start gives the same symbol): the inverse
+    /// of the table at `quantile / 2^24`, interpolated, mapped back through `μ`, `σ`, `Q`.
     #[inline]
-    fn hint(&self) -> u32 {
-        let h = (self.mu / self.q + 0.5).floor() - self.lo as f32;
-        if h.is_nan() || h <= 0.0 {
-            0
+    fn hint(&self, quantile: u32) -> u32 {
+        let target = (quantile as u64) << (32 - PRECISION);
+        let k = inverse_start(target);
+        let (a, b) = (PHI_TABLE[k], PHI_TABLE[k + 1]);
+        let frac = if b > a {
+            (target.saturating_sub(a)) as f32 / (b - a) as f32
         } else {
-            (h as u32).min(self.len - 1)
+            0.5
+        };
+        let t = (k as f32 + frac) * (1.0 / 256.0) - 8.0;
+        let h = (self.mu + t * self.sigma) / self.q + 0.5 - self.lo as f32;
+        // floor without a libm call; NaN and negatives start at 0.
+        if h.is_nan() || h < 1.0 {
+            0
+        } else if h >= self.len as f32 {
+            self.len - 1
+        } else {
+            h as u32
         }
     }
 
     /// The symbol `s` with `C(s) <= quantile < C(s + 1)`, and `C(s)`, `C(s + 1)`.
     pub fn find(&self, quantile: u32) -> (u32, u32, u32) {
-        let mut s = self.hint();
-        let mut cs = self.cdf(s);
-        let (mut lo, mut hi); // invariant: C(lo) <= quantile < C(hi)
-        if cs <= quantile {
-            // Gallop up.
+        let s = self.hint(quantile);
+        // Both edges at once (independent: they overlap in the pipeline).
+        let (cs, cn) = (self.cdf(s), self.cdf(s + 1));
+        if cs <= quantile && quantile < cn {
+            return (s, cs, cn);
+        }
+        // Invariant: C(lo) = c_lo <= quantile < C(hi) = c_hi.
+        let (mut lo, mut c_lo, mut hi, mut c_hi);
+        if cn <= quantile {
+            lo = s + 1;
+            c_lo = cn;
             let mut step = 1u32;
-            lo = s;
             loop {
-                let n = (lo + step).min(self.len);
+                let n = lo.saturating_add(step).min(self.len);
                 let c = self.cdf(n);
                 if c > quantile {
                     hi = n;
+                    c_hi = c;
                     break;
                 }
                 lo = n;
-                cs = c;
+                c_lo = c;
                 step = step.saturating_mul(2);
             }
         } else {
-            let mut step = 1u32;
             hi = s;
+            c_hi = cs;
+            let mut step = 1u32;
             loop {
                 let n = hi.saturating_sub(step);
                 let c = self.cdf(n);
                 if c <= quantile {
                     lo = n;
-                    cs = c;
+                    c_lo = c;
                     break;
                 }
                 hi = n;
+                c_hi = c;
                 step = step.saturating_mul(2);
             }
         }
@@ -145,14 +166,32 @@ impl GaussModel {
             let c = self.cdf(mid);
             if c <= quantile {
                 lo = mid;
-                cs = c;
+                c_lo = c;
             } else {
                 hi = mid;
+                c_hi = c;
             }
         }
-        s = lo;
-        (s, cs, self.cdf(s + 1))
+        (lo, c_lo, c_hi)
     }
+}
+
+/// The `k` in `0..4096` with `T[k] <= target < T[k+1]` (clamped), through a 256-bucket index
+/// of the table by the target's top byte.
+#[inline]
+fn inverse_start(target: u64) -> usize {
+    static INDEX: std::sync::OnceLock<[u16; 257]> = std::sync::OnceLock::new();
+    let idx = INDEX.get_or_init(|| {
+        // idx[b] = the largest k <= 4095 with T[k] <= b 2^24 (0 if none).
+        std::array::from_fn(|b| {
+            let v = (b as u64) << 24;
+            PHI_TABLE[..4096].partition_point(|&t| t <= v).saturating_sub(1) as u16
+        })
+    });
+    let b = ((target >> 24) as usize).min(255);
+    let (lo, hi) = (idx[b] as usize, idx[b + 1] as usize + 1);
+    let k = lo + PHI_TABLE[lo..hi.min(4096)].partition_point(|&t| t <= target);
+    k.saturating_sub(1).min(4095)
 }
 
 impl EntropyModel<PRECISION> for GaussModel {

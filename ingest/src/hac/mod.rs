@@ -27,6 +27,7 @@ pub mod grid;
 pub mod npy;
 pub mod ntc;
 mod repair;
+pub mod synthetic;
 mod to_ahac;
 
 use std::path::Path;
