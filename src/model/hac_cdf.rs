@@ -95,18 +95,13 @@ impl GaussModel {
     }
 
     /// Where the search for `quantile` starts (any start gives the same symbol): the inverse
-    /// of the table at `quantile / 2^24`, interpolated, mapped back through `μ`, `σ`, `Q`.
+    /// of the table at `quantile / 2^24`, mapped back through `μ`, `σ`, `Q`.
     #[inline]
     fn hint(&self, quantile: u32) -> u32 {
         let target = (quantile as u64) << (32 - PRECISION);
         let k = inverse_start(target);
-        let (a, b) = (PHI_TABLE[k], PHI_TABLE[k + 1]);
-        let frac = if b > a {
-            (target.saturating_sub(a)) as f32 / (b - a) as f32
-        } else {
-            0.5
-        };
-        let t = (k as f32 + frac) * (1.0 / 256.0) - 8.0;
+        // The middle of the table interval (1/512 of σ at most from the interpolated inverse).
+        let t = (k as f32 + 0.5) * (1.0 / 256.0) - 8.0;
         let h = (self.mu + t * self.sigma) / self.q + 0.5 - self.lo as f32;
         // floor without a libm call; NaN and negatives start at 0.
         if h.is_nan() || h < 1.0 {
@@ -176,22 +171,20 @@ impl GaussModel {
     }
 }
 
-/// The `k` in `0..4096` with `T[k] <= target < T[k+1]` (clamped), through a 256-bucket index
-/// of the table by the target's top byte.
+/// About the `k` with `T[k] <= target < T[k+1]`: a 4096-bucket index of the table by the
+/// target's top 12 bits (the largest `k` with `T[k]` at most the bucket's start). Only a hint.
 #[inline]
 fn inverse_start(target: u64) -> usize {
-    static INDEX: std::sync::OnceLock<[u16; 257]> = std::sync::OnceLock::new();
+    static INDEX: std::sync::OnceLock<Vec<u16>> = std::sync::OnceLock::new();
     let idx = INDEX.get_or_init(|| {
-        // idx[b] = the largest k <= 4095 with T[k] <= b 2^24 (0 if none).
-        std::array::from_fn(|b| {
-            let v = (b as u64) << 24;
-            PHI_TABLE[..4096].partition_point(|&t| t <= v).saturating_sub(1) as u16
-        })
+        (0..4096u64)
+            .map(|b| {
+                let v = b << 20;
+                PHI_TABLE[..4096].partition_point(|&t| t <= v).saturating_sub(1) as u16
+            })
+            .collect()
     });
-    let b = ((target >> 24) as usize).min(255);
-    let (lo, hi) = (idx[b] as usize, idx[b + 1] as usize + 1);
-    let k = lo + PHI_TABLE[lo..hi.min(4096)].partition_point(|&t| t <= target);
-    k.saturating_sub(1).min(4095)
+    idx[((target >> 20) as usize).min(4095)] as usize
 }
 
 impl EntropyModel<PRECISION> for GaussModel {

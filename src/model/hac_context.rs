@@ -7,6 +7,7 @@
 //! outputs (vectorised) without changing any output's summation order.
 
 use bitvec::prelude::*;
+use multiversion::multiversion;
 
 use super::hac_cdf::step;
 use super::ntc::{lookup, PLANES};
@@ -291,26 +292,8 @@ impl Prepared {
             .iter()
             .map(|&p| {
                 self.features(p, &mut x);
-                h.copy_from_slice(&c.b1);
-                for (i, &xi) in x.iter().enumerate() {
-                    let w = &self.w1t[i * h_n..(i + 1) * h_n];
-                    for (hj, &wj) in h.iter_mut().zip(w) {
-                        *hj += wj * xi;
-                    }
-                }
                 let mut out = [0f32; CONTEXT_OUT];
-                out.copy_from_slice(&c.b2);
-                for (j, &hj) in h.iter().enumerate() {
-                    // relu: h > 0 ? h : 0 (NaN -> 0). A zero input adds only signed zeros,
-                    // which change no later step (§6.13.5): skipped.
-                    if !(hj > 0.0) {
-                        continue;
-                    }
-                    let w = &self.w2t[j * CONTEXT_OUT..(j + 1) * CONTEXT_OUT];
-                    for (o, &wo) in out.iter_mut().zip(w) {
-                        *o += wo * hj;
-                    }
-                }
+                mlp(&self.w1t, &c.b1, &self.w2t, &c.b2, &x, &mut h, &mut out);
                 let adj = &out[CONTEXT_OUT - 3..];
                 let q = [
                     step(c.q_base[0], adj[0]),
@@ -323,6 +306,34 @@ impl Prepared {
     }
 }
 
+/// `mlp_grid` at `x` (§6.13.5): every output from its bias, adding `W[o,i] x[i]` in increasing
+/// `i`, product rounded then sum rounded (never fused: Rust does not contract `a * b + c`, so
+/// the AVX2 version computes the same bits); the loops run over the outputs, which vectorise.
+#[multiversion(targets("x86_64+avx2", "aarch64+neon"))]
+fn mlp(w1t: &[f32], b1: &[f32], w2t: &[f32], b2: &[f32], x: &[f32], h: &mut [f32], out: &mut [f32]) {
+    let h_n = h.len();
+    let o_n = out.len();
+    h.copy_from_slice(b1);
+    for (i, &xi) in x.iter().enumerate() {
+        let w = &w1t[i * h_n..(i + 1) * h_n];
+        for (hj, &wj) in h.iter_mut().zip(w) {
+            *hj += wj * xi;
+        }
+    }
+    out.copy_from_slice(b2);
+    for (j, &hj) in h.iter().enumerate() {
+        // relu: h > 0 ? h : 0 (NaN -> 0). A zero input adds only signed zeros, which change
+        // no later step (§6.13.5): skipped.
+        if !(hj > 0.0) {
+            continue;
+        }
+        let w = &w2t[j * o_n..(j + 1) * o_n];
+        for (o, &wo) in out.iter_mut().zip(w) {
+            *o += wo * hj;
+        }
+    }
+}
+
 /// `â = q interval + min` per axis with `interval = (max - min) (1/65535) + 1e-6`, f32, each
 /// operation rounded (§6.13.3; the reference's dequantisation).
 pub fn dequantize(q: &[[u16; 3]], bound_min: [f32; 3], bound_max: [f32; 3]) -> Vec<[f32; 3]> {
@@ -332,4 +343,52 @@ pub fn dequantize(q: &[[u16; 3]], bound_min: [f32; 3], bound_max: [f32; 3]) -> V
     q.iter()
         .map(|v| std::array::from_fn(|d| v[d] as f32 * interval[d] + bound_min[d]))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The transposed, vectorised (and on AVX2 machines, AVX2) MLP gives exactly the bits of
+    /// the plain per-output loop of §6.13.5, zero-skipping included.
+    #[test]
+    fn mlp_matches_the_plain_loop() {
+        let mut rng = fastrand::Rng::with_seed(9);
+        let (i_n, h_n, o_n) = (96, 100, CONTEXT_OUT);
+        for _ in 0..50 {
+            let mut v = |n: usize| (0..n).map(|_| (rng.f32() - 0.5) * 3.0).collect::<Vec<f32>>();
+            let (w1, b1, w2, b2, x) = (v(i_n * h_n), v(h_n), v(o_n * h_n), v(o_n), v(i_n));
+            let mut hp = vec![0f32; h_n];
+            for j in 0..h_n {
+                let mut a = b1[j];
+                for i in 0..i_n {
+                    a += w1[j * i_n + i] * x[i];
+                }
+                hp[j] = if a > 0.0 { a } else { 0.0 };
+            }
+            let mut op = vec![0f32; o_n];
+            for o in 0..o_n {
+                let mut a = b2[o];
+                for j in 0..h_n {
+                    a += w2[o * h_n + j] * hp[j];
+                }
+                op[o] = a;
+            }
+            let mut w1t = vec![0f32; i_n * h_n];
+            let mut w2t = vec![0f32; h_n * o_n];
+            for j in 0..h_n {
+                for i in 0..i_n {
+                    w1t[i * h_n + j] = w1[j * i_n + i];
+                }
+                for o in 0..o_n {
+                    w2t[j * o_n + o] = w2[o * h_n + j];
+                }
+            }
+            let mut h = vec![0f32; h_n];
+            let mut out = vec![0f32; o_n];
+            mlp(&w1t, &b1, &w2t, &b2, &x, &mut h, &mut out);
+            let bits = |v: &[f32]| v.iter().map(|x| (x + 0.0).to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&out), bits(&op));
+        }
+    }
 }
