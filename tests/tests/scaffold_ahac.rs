@@ -118,6 +118,10 @@ fn fixture_gop0_round_trips_in_symbols() {
 
 /// A hand-sized chunk: 5 anchors (3 static), batches of 2, one-level grids of 4 entries.
 pub fn tiny_hac() -> HacAnchors {
+    tiny_hac_n(3, 2)
+}
+
+fn tiny_hac_n(n_static: u32, n_dynamic: u32) -> HacAnchors {
     let mut rng = fastrand::Rng::with_seed(11);
     let shape = |log2| GridShape {
         resolutions: vec![4],
@@ -145,14 +149,14 @@ pub fn tiny_hac() -> HacAnchors {
         w2: w(hidden * CONTEXT_OUT, 1.0),
         b2: w(CONTEXT_OUT, 1.0),
     };
-    let n = 5;
+    let n = (n_static + n_dynamic) as usize;
     let quantized = (0..n)
         .map(|_| [rng.u16(..), rng.u16(..), rng.u16(..)])
         .collect();
     let mut s = |c: usize| (0..n * c).map(|_| rng.i32(-3..4)).collect::<Vec<i32>>();
     HacAnchors {
-        n_static: 3,
-        n_dynamic: 2,
+        n_static,
+        n_dynamic,
         batch: 2,
         context,
         quantized,
@@ -288,4 +292,72 @@ fn damaged_ahac_payloads_never_panic() {
     }
     println!("{errors} of {total} damaged payloads rejected, the rest decoded");
     assert!(errors > total / 4);
+}
+
+/// The fuzz seed of `fuzz_targets/scaffold_payloads.rs` (selector 4: an `AHAC` payload for its
+/// scene of 2 static + 1 dynamic anchors); written with `DLGS_WRITE_FUZZ_SEEDS=1`.
+#[test]
+fn ahac_fuzz_seed() {
+    let h = tiny_hac_n(2, 1);
+    let scene = scene_of(&h);
+    let (p, _) = ahac::encode(&h, &scene, 19).unwrap();
+    assert_eq!(ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap().0, h);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus/scaffold_payloads/seed-ahac");
+    let mut seed = vec![4u8];
+    seed.extend_from_slice(&p);
+    if std::env::var("DLGS_WRITE_FUZZ_SEEDS").is_ok() {
+        std::fs::write(&path, &seed).unwrap();
+    }
+    assert_eq!(std::fs::read(&path).unwrap(), seed, "regenerate with DLGS_WRITE_FUZZ_SEEDS=1");
+}
+
+/// The fixture's GOP 0 written as a whole Scaffold-GS file with `AHAC` and read back by the
+/// random-access decoder: the chunk decoder's anchors.
+#[test]
+fn a_file_with_ahac_decodes_through_the_scaffold_decoder() {
+    use dlgs::chunks::tfea::TfeaBody;
+    use dlgs::model::scaffold::AnchorDeformation;
+    use dlgs::model::TimeFeatures;
+    use dlgs_decoder::scaffold::ScaffoldDecoder;
+    use dlgs_encoder::scaffold::ScaffoldWriter;
+    let g = gop0();
+    let h = g.hac_anchors().unwrap();
+    let scene = scene_of(&h);
+    let mlps = g.mlps.view_mlps(Some(&g.mlps)).unwrap();
+    let d = AnchorDeformation {
+        bound_min: g.mlps.bounds.0,
+        bound_max: g.mlps.bounds.1,
+        mlps: g.mlps.deform.clone(),
+    };
+    let f = TimeFeatures::zeros(h.n_dynamic as usize, 7, 16);
+    let mut w = ScaffoldWriter::new(Vec::new(), scene.clone(), 3).unwrap();
+    w.push_gop_hac(&h, &mlps, Some((&d, &TfeaBody::Exact(f)))).unwrap();
+    let bytes = w.finish().unwrap();
+    let mut dec = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default()).unwrap();
+    let gop = dec.gop(0).unwrap();
+    assert_eq!(bits(&gop.canonical), bits(&h.canonical()));
+}
+
+/// Decode time of a 100k-anchor `AHAC` (real positions voxelised from a real scene, synthetic
+/// symbols from the fixture's context model: `dlgs_ingest::hac::synthetic`). Run with
+/// `--ignored --nocapture`; `dlgs ahac-bench` prints the same with CPU times.
+#[test]
+#[ignore]
+fn decode_time_100k_anchors() {
+    let ply = std::fs::read("/work/shared/data/ply/v3dg_donut_mipsplatting_45624_sh0.ply").unwrap();
+    let h = hac::synthetic::synthetic_anchors(&gop0().hac_anchors().unwrap(), &ply, 100_000, 1)
+        .unwrap();
+    let scene = scene_of(&h);
+    let (p, _) = ahac::encode(&h, &scene, 19).unwrap();
+    let mut out = Vec::new();
+    for threads in [1, 2] {
+        let (ms, c) = in_pool(threads, || {
+            let t = Instant::now();
+            let c = ahac::decode(&p, 0, &scene, &Limits::default()).unwrap();
+            (t.elapsed().as_secs_f64() * 1e3, c)
+        });
+        println!("100k anchors, {} bytes: decode {ms:.0} ms on {threads} thread(s)", p.len());
+        out.push(bits(&c));
+    }
+    assert_eq!(out[0], out[1]);
 }
