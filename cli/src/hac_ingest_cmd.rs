@@ -266,14 +266,40 @@ fn ahac_report(
 ) {
     let r = reference_anchor_files(dir);
     // mlp_grid in mlps.pth: its float32 parameters (the share of the pickle's tensor data).
-    let mlp_ref = 4 * (h.context.w1.len() + h.context.b1.len() + h.context.w2.len() + h.context.b2.len()) as u64;
+    let mlp_ref = 4
+        * (h.context.w1.len() + h.context.b1.len() + h.context.w2.len() + h.context.b2.len())
+            as u64;
     let rows: [(&str, u64, String); 6] = [
-        ("positions", sizes.positions as u64, format!("{} {}", r[0].0, r[0].1)),
-        ("grids", sizes.grids as u64, format!("{} {}", r[1].0, r[1].1)),
-        ("mlp_grid", sizes.mlp as u64, format!("mlps.pth share (f32 raw) {mlp_ref}")),
-        ("feature", sizes.streams[0] as u64, format!("{} {}", r[2].0, r[2].1)),
-        ("log-scaling", sizes.streams[1] as u64, format!("{} {}", r[3].0, r[3].1)),
-        ("offsets", sizes.streams[2] as u64, format!("{} {}", r[4].0, r[4].1)),
+        (
+            "positions",
+            sizes.positions as u64,
+            format!("{} {}", r[0].0, r[0].1),
+        ),
+        (
+            "grids",
+            sizes.grids as u64,
+            format!("{} {}", r[1].0, r[1].1),
+        ),
+        (
+            "mlp_grid",
+            sizes.mlp as u64,
+            format!("mlps.pth share (f32 raw) {mlp_ref}"),
+        ),
+        (
+            "feature",
+            sizes.streams[0] as u64,
+            format!("{} {}", r[2].0, r[2].1),
+        ),
+        (
+            "log-scaling",
+            sizes.streams[1] as u64,
+            format!("{} {}", r[3].0, r[3].1),
+        ),
+        (
+            "offsets",
+            sizes.streams[2] as u64,
+            format!("{} {}", r[4].0, r[4].1),
+        ),
     ];
     let head = sizes.header + sizes.batch_headers;
     let ours: u64 = rows.iter().map(|r| r.1).sum::<u64>() + head as u64;
@@ -328,7 +354,10 @@ pub fn run_ahac_bench(run: &Path, ply: Option<&Path>, anchors: usize, repeat: us
         let t = std::time::Instant::now();
         let s = hac::synthetic::synthetic_anchors(&fixture, &data, anchors, 1)
             .context("the scene does not give that many voxels")?;
-        println!("synthetic content built in {:.1} s", t.elapsed().as_secs_f64());
+        println!(
+            "synthetic content built in {:.1} s",
+            t.elapsed().as_secs_f64()
+        );
         cases.push((format!("synthetic, positions from {}", p.display()), s));
     }
     for (name, h) in cases {
@@ -342,12 +371,19 @@ pub fn run_ahac_bench(run: &Path, ply: Option<&Path>, anchors: usize, repeat: us
         );
         let mut cpu = Vec::new();
         for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()?;
             let mut ms: Vec<f64> = (0..repeat.max(1))
                 .map(|_| {
                     pool.install(|| {
                         let (t, c) = (std::time::Instant::now(), cpu_ms());
-                        let r = dlgs::chunks::ahac::decode(&payload, 0, &scene, &dlgs::Limits::default());
+                        let r = dlgs::chunks::ahac::decode(
+                            &payload,
+                            0,
+                            &scene,
+                            &dlgs::Limits::default(),
+                        );
                         let dt = t.elapsed().as_secs_f64() * 1e3;
                         r.map(|_| (dt, cpu_ms() - c))
                     })
@@ -384,7 +420,12 @@ pub fn run_ahac_bench(run: &Path, ply: Option<&Path>, anchors: usize, repeat: us
 /// elsewhere).
 fn cpu_ms() -> f64 {
     let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    let f: Vec<&str> = s.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+    let f: Vec<&str> = s
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
     let tick = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
     (tick(11) + tick(12)) * 10.0
 }

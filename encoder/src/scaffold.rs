@@ -4,8 +4,8 @@
 
 use std::io::Write;
 
-use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::chunks::ahac::{AhacSizes, HacAnchors};
+use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::chunks::{adef, ahac, amlp, ancr};
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};

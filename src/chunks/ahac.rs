@@ -95,7 +95,11 @@ fn values(
 impl HacAnchors {
     /// The decoded anchors (the decoder's arithmetic: context, steps, values).
     pub fn canonical(&self) -> ScaffoldCanonical {
-        let positions = dequantize(&self.quantized, self.context.bound_min, self.context.bound_max);
+        let positions = dequantize(
+            &self.quantized,
+            self.context.bound_min,
+            self.context.bound_max,
+        );
         let params = self.context.prepare().eval(&positions);
         let q: Vec<[f32; 3]> = params.iter().map(|p| p.q).collect();
         values(positions, &self.symbols, &q, self.n_static as usize)
@@ -142,9 +146,14 @@ fn encode_stream(params: &[AnchorParams], syms: &[i32], a: usize) -> Result<(i32
 }
 
 /// Serialise. The scene must agree on the anchor counts.
-pub fn encode(h: &HacAnchors, scene: &SceneHeader, zstd_level: i32) -> Result<(Vec<u8>, AhacSizes)> {
+pub fn encode(
+    h: &HacAnchors,
+    scene: &SceneHeader,
+    zstd_level: i32,
+) -> Result<(Vec<u8>, AhacSizes)> {
     let c = &h.context;
-    c.validate().map_err(|e| Error::input(format!("AHAC: {e}")))?;
+    c.validate()
+        .map_err(|e| Error::input(format!("AHAC: {e}")))?;
     let n = n_anchors(h);
     if h.n_static != scene.n_static || h.n_dynamic != scene.n_dynamic {
         return Err(Error::input("AHAC: anchor counts differ from the scene's"));
@@ -154,7 +163,9 @@ pub fn encode(h: &HacAnchors, scene: &SceneHeader, zstd_level: i32) -> Result<(V
         || !(1..=MAX_BATCH).contains(&h.batch)
         || c.grid3.resolutions.len() > 255
     {
-        return Err(Error::input("AHAC: positions, symbols or batch size do not fit"));
+        return Err(Error::input(
+            "AHAC: positions, symbols or batch size do not fit",
+        ));
     }
     let mut sizes = AhacSizes::default();
     let mut out = Vec::new();
@@ -174,7 +185,11 @@ pub fn encode(h: &HacAnchors, scene: &SceneHeader, zstd_level: i32) -> Result<(V
     let a = binary_bits::encode_segments(&segs, &ones, None);
     let b = binary_bits::encode_segments(&segs, &ones, Some(&g));
     let total = |v: &Vec<Vec<u32>>| v.iter().map(Vec::len).sum::<usize>();
-    let (scope, coded) = if total(&b) < total(&a) { (1u8, b) } else { (0u8, a) };
+    let (scope, coded) = if total(&b) < total(&a) {
+        (1u8, b)
+    } else {
+        (0u8, a)
+    };
     for v in [
         g3.resolutions.len() as u8,
         g3.log2_table,
@@ -362,8 +377,11 @@ pub fn decode_full(
     let z = r.take(plen, "AHAC positions")?;
     limits.check_alloc("AHAC positions", 6 * n as u64, at)?;
     let raw = zstd_exact(z, 6 * n as u64, at + 4)?;
-    let comp = |d: usize, i: usize| u16::from_le_bytes([raw[2 * (d * n + i)], raw[2 * (d * n + i) + 1]]);
-    let quantized: Vec<[u16; 3]> = (0..n).map(|i| [comp(0, i), comp(1, i), comp(2, i)]).collect();
+    let comp =
+        |d: usize, i: usize| u16::from_le_bytes([raw[2 * (d * n + i)], raw[2 * (d * n + i) + 1]]);
+    let quantized: Vec<[u16; 3]> = (0..n)
+        .map(|i| [comp(0, i), comp(1, i), comp(2, i)])
+        .collect();
 
     // Grid bits.
     let lens = HacContext::level_bits(&grid3, &grid2);
@@ -377,7 +395,10 @@ pub fn decode_full(
         let s = r.u32("AHAC segment bytes")? as usize;
         let constant = o == 0 || o == nb as u64;
         if o > nb as u64 || !s.is_multiple_of(4) || constant != (s == 0) {
-            return Err(bad(format!("segment of {s} bytes for {o} ones of {nb} bits"), at));
+            return Err(bad(
+                format!("segment of {s} bytes for {o} ones of {nb} bits"),
+                at,
+            ));
         }
         ones.push(o);
         sizes.push(s);
@@ -438,7 +459,11 @@ pub fn decode_full(
     let mut jobs = Vec::with_capacity(3 * nb);
     for k in 0..3 * nb {
         let hat = at + 12 * k as u64;
-        let (lo, hi, bytes) = (word(3 * k) as i32, word(3 * k + 1) as i32, word(3 * k + 2) as usize);
+        let (lo, hi, bytes) = (
+            word(3 * k) as i32,
+            word(3 * k + 1) as i32,
+            word(3 * k + 2) as usize,
+        );
         if lo < -MAX_SYMBOL_MAGNITUDE || hi > MAX_SYMBOL_MAGNITUDE || hi < lo {
             return Err(bad(format!("symbol range [{lo}, {hi}]"), hat));
         }
@@ -446,7 +471,10 @@ pub fn decode_full(
             return Err(bad(format!("alphabet of {} symbols", hi - lo + 1), hat));
         }
         if !bytes.is_multiple_of(4) || (lo == hi) != (bytes == 0) {
-            return Err(bad(format!("stream of {bytes} bytes for [{lo}, {hi}]"), hat));
+            return Err(bad(
+                format!("stream of {bytes} bytes for [{lo}, {hi}]"),
+                hat,
+            ));
         }
         jobs.push((lo, hi, bytes));
     }
@@ -456,7 +484,10 @@ pub fn decode_full(
         data.push((lo, hi, sat, r.take(bytes, "AHAC stream")?));
     }
     if r.remaining() != 0 {
-        return Err(bad(format!("{} bytes after the streams", r.remaining()), r.offset()));
+        return Err(bad(
+            format!("{} bytes after the streams", r.remaining()),
+            r.offset(),
+        ));
     }
     let syms_total: u64 = ATTR_CHANNELS.iter().map(|&c| (c * n) as u64).sum();
     limits.check_alloc("AHAC symbols", 8 * syms_total + 12 * n as u64, at)?;

@@ -180,7 +180,9 @@ fn inverse_start(target: u64) -> usize {
         (0..4096u64)
             .map(|b| {
                 let v = b << 20;
-                PHI_TABLE[..4096].partition_point(|&t| t <= v).saturating_sub(1) as u16
+                PHI_TABLE[..4096]
+                    .partition_point(|&t| t <= v)
+                    .saturating_sub(1) as u16
             })
             .collect()
     });
@@ -194,7 +196,10 @@ impl EntropyModel<PRECISION> for GaussModel {
 
 impl EncoderModel<PRECISION> for GaussModel {
     #[inline]
-    fn left_cumulative_and_probability(&self, symbol: impl Borrow<u32>) -> Option<(u32, NonZeroU32)> {
+    fn left_cumulative_and_probability(
+        &self,
+        symbol: impl Borrow<u32>,
+    ) -> Option<(u32, NonZeroU32)> {
         let s = *symbol.borrow();
         if s >= self.len {
             return None;
@@ -208,7 +213,11 @@ impl DecoderModel<PRECISION> for GaussModel {
     #[inline]
     fn quantile_function(&self, quantile: u32) -> (u32, u32, NonZeroU32) {
         let (s, a, b) = self.find(quantile);
-        (s, a, NonZeroU32::new(b - a).expect("C is strictly increasing"))
+        (
+            s,
+            a,
+            NonZeroU32::new(b - a).expect("C is strictly increasing"),
+        )
     }
 }
 
@@ -236,7 +245,15 @@ mod tests {
     #[test]
     fn cdf_is_strictly_increasing_and_find_inverts_it() {
         let mut rng = fastrand::Rng::with_seed(3);
-        let odd = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30];
+        let odd = [
+            0.0,
+            -0.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e30,
+            -1e30,
+        ];
         for case in 0..3000 {
             let len = if case % 7 == 0 { 2 } else { rng.u32(2..600) };
             let lo = rng.i32(-300..300);
@@ -252,7 +269,11 @@ mod tests {
                 len,
                 pick(&mut rng, 400.0),
                 pick(&mut rng, 30.0).abs(),
-                if case % 11 == 0 { 0.0 } else { pick(&mut rng, 2.0).abs() },
+                if case % 11 == 0 {
+                    0.0
+                } else {
+                    pick(&mut rng, 2.0).abs()
+                },
             );
             let mut prev = 0;
             for j in 1..=len {

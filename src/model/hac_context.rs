@@ -140,7 +140,8 @@ impl HacContext {
             return Err("base steps must be finite and > 0".into());
         }
         let bits = Self::level_bits(&self.grid3, &self.grid2);
-        if self.levels.len() != bits.len() || self.levels.iter().zip(&bits).any(|(l, &n)| l.len() != n)
+        if self.levels.len() != bits.len()
+            || self.levels.iter().zip(&bits).any(|(l, &n)| l.len() != n)
         {
             return Err("grid bit counts do not match the shapes".into());
         }
@@ -180,7 +181,11 @@ impl HacContext {
             .iter()
             .enumerate()
             .map(|(l, b)| {
-                let f = if l < n3 { self.grid3.features } else { self.grid2.features };
+                let f = if l < n3 {
+                    self.grid3.features
+                } else {
+                    self.grid2.features
+                };
                 entry(b, f as usize)
             })
             .collect();
@@ -310,7 +315,15 @@ impl Prepared {
 /// `i`, product rounded then sum rounded (never fused: Rust does not contract `a * b + c`, so
 /// the AVX2 version computes the same bits); the loops run over the outputs, which vectorise.
 #[multiversion(targets("x86_64+avx2", "aarch64+neon"))]
-fn mlp(w1t: &[f32], b1: &[f32], w2t: &[f32], b2: &[f32], x: &[f32], h: &mut [f32], out: &mut [f32]) {
+fn mlp(
+    w1t: &[f32],
+    b1: &[f32],
+    w2t: &[f32],
+    b2: &[f32],
+    x: &[f32],
+    h: &mut [f32],
+    out: &mut [f32],
+) {
     let h_n = h.len();
     let o_n = out.len();
     h.copy_from_slice(b1);
@@ -356,7 +369,11 @@ mod tests {
         let mut rng = fastrand::Rng::with_seed(9);
         let (i_n, h_n, o_n) = (96, 100, CONTEXT_OUT);
         for _ in 0..50 {
-            let mut v = |n: usize| (0..n).map(|_| (rng.f32() - 0.5) * 3.0).collect::<Vec<f32>>();
+            let mut v = |n: usize| {
+                (0..n)
+                    .map(|_| (rng.f32() - 0.5) * 3.0)
+                    .collect::<Vec<f32>>()
+            };
             let (w1, b1, w2, b2, x) = (v(i_n * h_n), v(h_n), v(o_n * h_n), v(o_n), v(i_n));
             let mut hp = vec![0f32; h_n];
             for j in 0..h_n {

@@ -179,14 +179,22 @@ fn a_tiny_chunk_round_trips_and_a_zero_step_decodes_to_zeros() {
     let (p, _) = ahac::encode(&z, &scene, 19).unwrap();
     let (d, c) = ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap();
     assert_eq!(d.symbols, z.symbols);
-    assert!(c.statics.offsets.iter().chain(&c.dynamics.offsets).all(|&v| v == 0.0));
+    assert!(c
+        .statics
+        .offsets
+        .iter()
+        .chain(&c.dynamics.offsets)
+        .all(|&v| v == 0.0));
     assert!(c.statics.features.iter().any(|&v| v != 0.0));
 
     // One symbol value for a whole stream: no words.
     let mut one = h.clone();
     one.symbols[1].iter_mut().for_each(|v| *v = 2);
     let (p, _) = ahac::encode(&one, &scene, 19).unwrap();
-    assert_eq!(ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap().0, one);
+    assert_eq!(
+        ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap().0,
+        one
+    );
 }
 
 fn kind(e: &Error) -> Option<&FormatErrorKind> {
@@ -219,7 +227,10 @@ fn invalid_tiny_chunks_give_typed_errors() {
     };
     // Truncated anywhere: an error (Truncated inside a field, Payload/Decompress otherwise).
     for cut in 0..p.len() {
-        assert!(ahac::decode_full(&p[..cut], 0, &scene, &Limits::tiny()).is_err(), "cut {cut}");
+        assert!(
+            ahac::decode_full(&p[..cut], 0, &scene, &Limits::tiny()).is_err(),
+            "cut {cut}"
+        );
     }
     assert!(matches!(
         kind(&ahac::decode_full(&p[..10], 0, &scene, &Limits::tiny()).unwrap_err()),
@@ -245,10 +256,7 @@ fn invalid_tiny_chunks_give_typed_errors() {
     assert!(ahac::decode_full(&q, 0, &scene, &Limits::tiny()).is_err());
     payload_err(&q, "bytes not a multiple of 4");
     // Counts that disagree with the scene; batch 0; output width not 175; reserved byte.
-    for (off, val, what) in [
-        (0usize, 9u32, "n_static"),
-        (8, 0, "batch 0"),
-    ] {
+    for (off, val, what) in [(0usize, 9u32, "n_static"), (8, 0, "batch 0")] {
         let mut q = p.clone();
         q[off..off + 4].copy_from_slice(&val.to_le_bytes());
         payload_err(&q, what);
@@ -301,14 +309,22 @@ fn ahac_fuzz_seed() {
     let h = tiny_hac_n(2, 1);
     let scene = scene_of(&h);
     let (p, _) = ahac::encode(&h, &scene, 19).unwrap();
-    assert_eq!(ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap().0, h);
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus/scaffold_payloads/seed-ahac");
+    assert_eq!(
+        ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap().0,
+        h
+    );
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus/scaffold_payloads/seed-ahac");
     let mut seed = vec![4u8];
     seed.extend_from_slice(&p);
     if std::env::var("DLGS_WRITE_FUZZ_SEEDS").is_ok() {
         std::fs::write(&path, &seed).unwrap();
     }
-    assert_eq!(std::fs::read(&path).unwrap(), seed, "regenerate with DLGS_WRITE_FUZZ_SEEDS=1");
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        seed,
+        "regenerate with DLGS_WRITE_FUZZ_SEEDS=1"
+    );
 }
 
 /// The fixture's GOP 0 written as a whole Scaffold-GS file with `AHAC` and read back by the
@@ -331,7 +347,8 @@ fn a_file_with_ahac_decodes_through_the_scaffold_decoder() {
     };
     let f = TimeFeatures::zeros(h.n_dynamic as usize, 7, 16);
     let mut w = ScaffoldWriter::new(Vec::new(), scene.clone(), 3).unwrap();
-    w.push_gop_hac(&h, &mlps, Some((&d, &TfeaBody::Exact(f)))).unwrap();
+    w.push_gop_hac(&h, &mlps, Some((&d, &TfeaBody::Exact(f))))
+        .unwrap();
     let bytes = w.finish().unwrap();
     let mut dec = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default()).unwrap();
     let gop = dec.gop(0).unwrap();
@@ -356,7 +373,10 @@ fn decode_time_100k_anchors() {
             let c = ahac::decode(&p, 0, &scene, &Limits::default()).unwrap();
             (t.elapsed().as_secs_f64() * 1e3, c)
         });
-        println!("100k anchors, {} bytes: decode {ms:.0} ms on {threads} thread(s)", p.len());
+        println!(
+            "100k anchors, {} bytes: decode {ms:.0} ms on {threads} thread(s)",
+            p.len()
+        );
         out.push(bits(&c));
     }
     assert_eq!(out[0], out[1]);

@@ -11,7 +11,12 @@ use dlgs::model::hac_context::{dequantize, AnchorParams, ATTR_CHANNELS};
 /// `n` anchors voxelised from points sampled in the Gaussians of `ply` (PLY bytes), with the
 /// context model of `model`; `None` if the scene cannot give `n` distinct voxels.
 #[allow(clippy::disallowed_methods)] // benchmark data, not decoded data
-pub fn synthetic_anchors(model: &HacAnchors, ply: &[u8], n: usize, seed: u64) -> Option<HacAnchors> {
+pub fn synthetic_anchors(
+    model: &HacAnchors,
+    ply: &[u8],
+    n: usize,
+    seed: u64,
+) -> Option<HacAnchors> {
     let g = dlgs::interop::ply::read_ply(ply, &dlgs::Limits::default()).ok()?;
     let mut rng = fastrand::Rng::with_seed(seed);
     let normal = |r: &mut fastrand::Rng| (0..12).map(|_| r.f32()).sum::<f32>() - 6.0;
@@ -64,14 +69,16 @@ pub fn synthetic_anchors(model: &HacAnchors, ply: &[u8], n: usize, seed: u64) ->
         std::array::from_fn(|d| (bmax[d] - bmin[d]) * (1.0f64 / 65535.0) as f32 + 1e-6f32);
     let quantized: Vec<[u16; 3]> = pos
         .iter()
-        .map(|p| std::array::from_fn(|d| ((p[d] - bmin[d]) / interval[d]).round().clamp(0.0, 65535.0) as u16))
+        .map(|p| {
+            std::array::from_fn(|d| {
+                ((p[d] - bmin[d]) / interval[d]).round().clamp(0.0, 65535.0) as u16
+            })
+        })
         .collect();
     let mut context = model.context.clone();
     context.bound_min = bmin;
     context.bound_max = bmax;
-    let params = context
-        .prepare()
-        .eval(&dequantize(&quantized, bmin, bmax));
+    let params = context.prepare().eval(&dequantize(&quantized, bmin, bmax));
     let mut symbols: [Vec<i32>; 3] = Default::default();
     for p in &params {
         for (a, s) in symbols.iter_mut().enumerate() {
@@ -80,7 +87,11 @@ pub fn synthetic_anchors(model: &HacAnchors, ply: &[u8], n: usize, seed: u64) ->
             for ch in 0..c {
                 let (mu, sigma) = (p.out[m + ch], p.out[m + c + ch].max(1e-9));
                 let x = mu + sigma * normal(&mut rng);
-                let xi = if p.q[a] > 0.0 { (x / p.q[a]).round() } else { 0.0 };
+                let xi = if p.q[a] > 0.0 {
+                    (x / p.q[a]).round()
+                } else {
+                    0.0
+                };
                 s.push(xi.clamp(-30000.0, 30000.0) as i32);
             }
         }

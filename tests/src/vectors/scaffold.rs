@@ -118,9 +118,7 @@ pub fn hac_anchors() -> dlgs::chunks::ahac::HacAnchors {
         .positions
         .iter()
         .chain(&c.dynamics.positions)
-        .map(|p| {
-            std::array::from_fn(|a| ((p[a] - bmin[a]) / (bmax[a] - bmin[a]) * 65535.0) as u16)
-        })
+        .map(|p| std::array::from_fn(|a| ((p[a] - bmin[a]) / (bmax[a] - bmin[a]) * 65535.0) as u16))
         .collect();
     let context = HacContext {
         grid3,
@@ -142,7 +140,11 @@ pub fn hac_anchors() -> dlgs::chunks::ahac::HacAnchors {
         batch: 2,
         context,
         quantized,
-        symbols: [s(FEAT_DIM, -4, 4), s(SCALING_DIM, -3100, -2900), s(3 * N_OFFSETS, -9, 9)],
+        symbols: [
+            s(FEAT_DIM, -4, 4),
+            s(SCALING_DIM, -3100, -2900),
+            s(3 * N_OFFSETS, -9, 9),
+        ],
     }
 }
 
