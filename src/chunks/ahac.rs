@@ -289,6 +289,9 @@ fn read_shape(r: &mut ByteReader, levels: u8, log2: u8, features: u8) -> Result<
     })
 }
 
+/// A decoded batch: each anchor's steps and the batch's integers per attribute.
+type BatchOut = (Vec<[f32; 3]>, [Vec<i32>; 3]);
+
 /// Decode one batch's stream of attribute `a`.
 fn decode_stream(
     params: &[AnchorParams],
@@ -493,7 +496,7 @@ pub fn decode_full(
     limits.check_alloc("AHAC symbols", 8 * syms_total + 12 * n as u64, at)?;
     let positions = dequantize(&quantized, context.bound_min, context.bound_max);
     let prepared: Prepared = context.prepare();
-    let decoded: Vec<(Vec<[f32; 3]>, [Vec<i32>; 3])> = (0..nb)
+    let decoded: Vec<BatchOut> = (0..nb)
         .into_par_iter()
         .map(|b| {
             let (a0, a1) = (b * bsz, ((b + 1) * bsz).min(n));

@@ -5,7 +5,7 @@
 
 /// `round(2^32 Φ(-8 + k/256))`.
 #[rustfmt::skip]
-pub const PHI_TABLE: [u64; 4097] = [
+pub static PHI_TABLE: [u64; 4097] = [
     0, 0, 0, 0, 0, 0, 0, 0,
     0, 0, 0, 0, 0, 0, 0, 0,
     0, 0, 0, 0, 0, 0, 0, 0,
