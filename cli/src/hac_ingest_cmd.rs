@@ -94,6 +94,7 @@ pub fn run_hac_ingest(
     fps: u32,
     exact_features: bool,
     raw_anchors: bool,
+    anchor_step_scale: f32,
 ) -> Result<()> {
     let limits = dlgs::Limits::default();
     let pb = bar(dirs.len() as u64, "decoding HAC bitstreams");
@@ -123,7 +124,11 @@ pub fn run_hac_ingest(
         "source": "DLGStream reference implementation output (HAC / Scaffold-GS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
-        "settings": { "exact_features": exact_features, "raw_anchors": raw_anchors },
+        "settings": {
+            "exact_features": exact_features,
+            "raw_anchors": raw_anchors,
+            "anchor_step_scale": anchor_step_scale,
+        },
     });
     w.scene_chunk(ChunkType::META, &serde_json::to_vec(&meta)?)?;
     let pb = bar(gops.len() as u64, "writing");
@@ -183,6 +188,7 @@ pub fn run_hac_ingest(
         let dynamic = body.as_ref().map(|b| (&deformation, b));
         match gop.hac_anchors().filter(|_| !raw_anchors) {
             Some(h) => {
+                let h = h.requantized(anchor_step_scale)?;
                 let t = std::time::Instant::now();
                 let sizes = w
                     .push_gop_hac(&h, &mlps, dynamic)

@@ -281,6 +281,7 @@ fn main() -> Result<()> {
                     fps,
                     codec.exact_features,
                     codec.raw_anchors,
+                    codec.anchor_step_scale,
                 )
             } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)

@@ -106,6 +106,38 @@ impl HacAnchors {
     }
 }
 
+impl HacAnchors {
+    /// Near-lossless: the same anchors with every step `k` times larger (`Q_BASE × k`, so
+    /// `Q' = k Q` up to rounding) and the integers requantised, `x' = round(x Q / Q')` (0 where
+    /// `Q'` is 0). Each value moves by at most `Q' / 2` (plus rounding); `k = 1` changes nothing.
+    pub fn requantized(&self, k: f32) -> Result<HacAnchors> {
+        if !(k.is_finite() && k > 0.0) {
+            return Err(Error::input(format!("AHAC: step scale {k} (finite, > 0)")));
+        }
+        if k == 1.0 {
+            return Ok(self.clone());
+        }
+        let positions = dequantize(
+            &self.quantized,
+            self.context.bound_min,
+            self.context.bound_max,
+        );
+        let old = self.context.prepare().eval(&positions);
+        let mut out = self.clone();
+        out.context.q_base = self.context.q_base.map(|q| q * k);
+        let new = out.context.prepare().eval(&positions);
+        for a in 0..3 {
+            let c = ATTR_CHANNELS[a];
+            for (i, x) in out.symbols[a].iter_mut().enumerate() {
+                let (q0, q1) = (old[i / c].q[a], new[i / c].q[a]);
+                let v = *x as f32 * q0;
+                *x = if q1 > 0.0 { (v / q1).round() as i32 } else { 0 };
+            }
+        }
+        Ok(out)
+    }
+}
+
 /// The model of symbol `k` (anchor `k / c`, channel `k % c`) of attribute `a`.
 #[inline]
 fn model(p: &AnchorParams, a: usize, ch: usize, lo: i32, len: u32) -> GaussModel {

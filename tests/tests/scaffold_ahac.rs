@@ -353,6 +353,39 @@ fn a_file_with_ahac_decodes_through_the_scaffold_decoder() {
     let mut dec = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default()).unwrap();
     let gop = dec.gop(0).unwrap();
     assert_eq!(bits(&gop.canonical), bits(&h.canonical()));
+
+    // A GOP with both ANCR and AHAC: Payload; with neither: MissingChunk (§6.9, §6.13).
+    use dlgs::chunks::{adef, amlp, ancr, tfea};
+    use dlgs::container::{ChunkType, Writer, FLAG_MUST_UNDERSTAND};
+    let f = TimeFeatures::zeros(h.n_dynamic as usize, 7, 16);
+    let parts = [
+        (
+            ChunkType::ANCR,
+            ancr::encode(&h.canonical(), &scene, 3).unwrap(),
+        ),
+        (ChunkType::AHAC, ahac::encode(&h, &scene, 3).unwrap().0),
+        (ChunkType::AMLP, amlp::encode(&mlps, &scene, 3).unwrap()),
+        (ChunkType::ADEF, adef::encode(&d, 3).unwrap()),
+        (
+            ChunkType::TFEA,
+            tfea::encode(&TfeaBody::Exact(f), 3).unwrap(),
+        ),
+    ];
+    for (skip, want) in [(None, "Payload"), (Some(2), "MissingChunk")] {
+        let mut w = Writer::new(Vec::new(), scene.clone()).unwrap();
+        w.begin_gop().unwrap();
+        for (k, (ty, p)) in parts.iter().enumerate() {
+            if skip.is_some_and(|s| k < s) {
+                continue;
+            }
+            w.gop_chunk(*ty, FLAG_MUST_UNDERSTAND, p).unwrap();
+        }
+        let bytes = w.finish().unwrap();
+        let e = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default())
+            .and_then(|mut d| d.gop(0).map(|_| ()))
+            .unwrap_err();
+        assert_eq!(e.name(), want, "{e}");
+    }
 }
 
 /// Decode time of a 100k-anchor `AHAC` (real positions voxelised from a real scene, synthetic
@@ -380,4 +413,37 @@ fn decode_time_100k_anchors() {
         out.push(bits(&c));
     }
     assert_eq!(out[0], out[1]);
+}
+
+/// Near-lossless (`--anchor-step-scale`): steps `k` times larger, every value within half a
+/// new step (`Q' <= 2 k Q_BASE`) of the lossless one, and fewer stream bytes on the fixture.
+#[test]
+fn requantized_anchors_stay_within_half_a_step() {
+    let h = tiny_hac();
+    for k in [2.0f32, 4.0] {
+        let r = h.requantized(k).unwrap();
+        let (a, b) = (h.canonical(), r.canonical());
+        for (set_a, set_b) in [(&a.statics, &b.statics), (&a.dynamics, &b.dynamics)] {
+            for (x, y, base) in [
+                (&set_a.features, &set_b.features, h.context.q_base[0]),
+                (
+                    &set_a.log_scalings,
+                    &set_b.log_scalings,
+                    h.context.q_base[1],
+                ),
+                (&set_a.offsets, &set_b.offsets, h.context.q_base[2]),
+            ] {
+                let tol = k * base * (1.0 + 1e-5) + 1e-6 * max_diff(x, &vec![0.0; x.len()]);
+                assert!(max_diff(x, y) <= tol, "k {k}: {} > {tol}", max_diff(x, y));
+            }
+        }
+        let scene = scene_of(&r);
+        let (p, _) = ahac::encode(&r, &scene, 19).unwrap();
+        assert_eq!(
+            ahac::decode_full(&p, 0, &scene, &Limits::tiny()).unwrap().0,
+            r
+        );
+    }
+    assert_eq!(h.requantized(1.0).unwrap(), h);
+    assert!(h.requantized(0.0).is_err());
 }
