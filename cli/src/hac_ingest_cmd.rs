@@ -238,8 +238,9 @@ pub fn run_hac_ingest(
 }
 
 /// Bytes of the reference's files for the anchors of one GOP: `anchor.npy`, `hash.b` and the
-/// Gaussian-coded files of each attribute (prefix `feat_`, `scaling_`, `offsets_`).
-fn reference_anchor_files(dir: &Path) -> [(String, u64); 5] {
+/// Gaussian-coded files of each attribute (prefix `feat_`, `scaling_`, `offsets_`), and
+/// `patched_infos.npy` (counts, batch size, box).
+fn reference_anchor_files(dir: &Path) -> [(String, u64); 6] {
     let bs = dir.join("bitstreams");
     let size = |p: PathBuf| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
     let prefixed = |pre: &str| -> u64 {
@@ -258,6 +259,10 @@ fn reference_anchor_files(dir: &Path) -> [(String, u64); 5] {
         ("feat_*.b".into(), prefixed("feat_")),
         ("scaling_*.b".into(), prefixed("scaling_")),
         ("offsets_*.b".into(), prefixed("offsets_")),
+        (
+            "patched_infos.npy".into(),
+            size(bs.join("patched_infos.npy")),
+        ),
     ]
 }
 
@@ -317,7 +322,10 @@ fn ahac_report(
     for (name, b, rf) in &rows {
         println!("  {name:<12} {b:>9}   {rf}");
     }
-    println!("  {:<12} {head:>9}   (header, batch headers)", "headers");
+    println!(
+        "  {:<12} {head:>9}   {} {} (ours: header, batch headers)",
+        "headers", r[5].0, r[5].1
+    );
     println!(
         "  {:<12} {ours:>9}   {theirs} ({:.1} %)",
         "total",
