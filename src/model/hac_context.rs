@@ -165,13 +165,18 @@ impl HacContext {
 
     /// Lookup tables and transposed weights for [`Prepared::eval`].
     pub fn prepare(&self) -> Prepared {
+        // Entry e's f bits straight from the words (bit k is bit k % 64 of word k / 64).
         let entry = |bits: &BitVec<u64, Lsb0>, f: usize| -> Vec<u8> {
-            bits.chunks(f)
-                .map(|c| {
-                    c.iter()
-                        .by_vals()
-                        .enumerate()
-                        .fold(0u8, |m, (k, b)| m | ((b as u8) << k))
+            let w = bits.as_raw_slice();
+            let mask = (1u64 << f) - 1;
+            (0..bits.len() / f)
+                .map(|e| {
+                    let (i, o) = (e * f / 64, e * f % 64);
+                    let mut v = w[i] >> o;
+                    if o + f > 64 {
+                        v |= w[i + 1] << (64 - o);
+                    }
+                    (v & mask) as u8
                 })
                 .collect()
         };
