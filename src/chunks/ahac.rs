@@ -421,7 +421,12 @@ pub fn decode_full(
     // Grid bits.
     let lens = HacContext::level_bits(&grid3, &grid2);
     let total_bits: u64 = lens.iter().map(|&b| b as u64).sum();
-    limits.check_alloc("AHAC grid bits", total_bits / 8 + 8 * lens.len() as u64, at)?;
+    // The bits, and the decoder's lookup tables (at most one byte per bit).
+    limits.check_alloc(
+        "AHAC grid bits and tables",
+        total_bits / 8 + total_bits + 8 * lens.len() as u64,
+        at,
+    )?;
     let mut ones = Vec::with_capacity(lens.len());
     let mut sizes = Vec::with_capacity(lens.len());
     for &nb in &lens {
@@ -463,7 +468,8 @@ pub fn decode_full(
     let at = r.offset();
     let wlen = r.u32("AHAC mlp_grid length")? as usize;
     let z = r.take(wlen, "AHAC mlp_grid")?;
-    limits.check_alloc("AHAC mlp_grid", params as u64 * 4, at)?;
+    // The weights, and their transposed copy.
+    limits.check_alloc("AHAC mlp_grid", params as u64 * 8, at)?;
     let raw = zstd_exact(z, params as u64 * 4, at + 4)?;
     let mut w = ByteReader::new(&raw, at + 4);
     let mut take = |k| w.f32_vec(k, "AHAC mlp_grid");
