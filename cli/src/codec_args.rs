@@ -230,6 +230,21 @@ pub struct CodecArgs {
         long
     )]
     pub exact_features: bool,
+    /// Reference HAC runs: store GOP 0's anchors raw (`ANCR`, f32 + zstd) instead of
+    /// HAC-coded (`AHAC`, format-spec §6.13, the default).
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long
+    )]
+    pub raw_anchors: bool,
+    /// Reference HAC runs, near-lossless: `AHAC` steps this many times the reference's, the
+    /// anchors' integers requantised (1 = lossless in symbols).
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long,
+        default_value_t = 1.0
+    )]
+    pub anchor_step_scale: f32,
     /// One quantisation range for all 16 channels, as the reference (default: per channel).
     #[arg(
         help_heading = "Dynamic streams: time features, decoders and residuals",

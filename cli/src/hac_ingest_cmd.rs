@@ -122,6 +122,8 @@ pub fn run_hac_ingest(
     fps: u32,
     exact_features: bool,
     residual_mode: Option<&str>,
+    raw_anchors: bool,
+    anchor_step_scale: f32,
 ) -> Result<()> {
     let limits = dlgs::Limits::default();
     let pb = bar(dirs.len() as u64, "decoding HAC bitstreams");
@@ -163,7 +165,12 @@ pub fn run_hac_ingest(
         "source": "DLGStream reference implementation output (HAC / Scaffold-GS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
-        "settings": { "exact_features": exact_features, "residual_mode": if sequential { "sequential" } else { "intra" } },
+        "settings": {
+            "exact_features": exact_features,
+            "residual_mode": if sequential { "sequential" } else { "intra" },
+            "raw_anchors": raw_anchors,
+            "anchor_step_scale": anchor_step_scale,
+        },
     });
     w.scene_chunk(ChunkType::META, &serde_json::to_vec(&meta)?)?;
     let pb = bar(gops.len() as u64, "writing");
@@ -264,11 +271,24 @@ pub fn run_hac_ingest(
                 ));
                 decoded = Some((ours, mlps));
             }
-            _ => {
-                w.push_gop(&canonical, &mlps, dynamic)
-                    .with_context(|| format!("writing GOP {g}"))?;
-                decoded = Some((canonical, mlps));
-            }
+            _ => match gop.hac_anchors().filter(|_| !raw_anchors) {
+                Some(h) => {
+                    let h = h.requantized(anchor_step_scale)?;
+                    let t = std::time::Instant::now();
+                    let sizes = w
+                        .push_gop_hac(&h, &mlps, dynamic)
+                        .with_context(|| format!("writing GOP {g}"))?;
+                    let ms = t.elapsed().as_secs_f64() * 1e3;
+                    ahac_report(dir, &h, &sizes, &canonical, ms);
+                    // Later residuals apply to what the decoder holds: the AHAC anchors.
+                    decoded = Some((h.canonical(), mlps));
+                }
+                None => {
+                    w.push_gop(&canonical, &mlps, dynamic)
+                        .with_context(|| format!("writing GOP {g}"))?;
+                    decoded = Some((canonical, mlps));
+                }
+            },
         }
         pb.set_position(g as u64 + 1);
     }
@@ -285,8 +305,7 @@ pub fn run_hac_ingest(
         bytes.len()
     );
     println!(
-        "bytes per frame: reference {:.1} (bitstreams, mp4, mlps.pth, csv), .dlgs {:.1} ({:.1} %; \
-         GOP 0's anchors stored raw, HAC-style coding not yet)",
+        "bytes per frame: reference {:.1} (bitstreams, mp4, mlps.pth, csv), .dlgs {:.1} ({:.1} %)",
         reference as f64 / frames,
         bytes.len() as f64 / frames,
         100.0 * bytes.len() as f64 / reference.max(1) as f64
@@ -309,4 +328,211 @@ pub fn run_hac_ingest(
         );
     }
     Ok(())
+}
+
+/// Bytes of the reference's files for the anchors of one GOP: `anchor.npy`, `hash.b` and the
+/// Gaussian-coded files of each attribute (prefix `feat_`, `scaling_`, `offsets_`), and
+/// `patched_infos.npy` (counts, batch size, box).
+fn reference_anchor_files(dir: &Path) -> [(String, u64); 6] {
+    let bs = dir.join("bitstreams");
+    let size = |p: PathBuf| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+    let prefixed = |pre: &str| -> u64 {
+        std::fs::read_dir(&bs)
+            .map(|it| {
+                it.filter_map(|e| e.ok())
+                    .filter(|e| e.file_name().to_string_lossy().starts_with(pre))
+                    .map(|e| e.metadata().map(|m| m.len()).unwrap_or(0))
+                    .sum()
+            })
+            .unwrap_or(0)
+    };
+    [
+        ("anchor.npy".into(), size(bs.join("anchor.npy"))),
+        ("hash.b".into(), size(bs.join("hash.b"))),
+        ("feat_*.b".into(), prefixed("feat_")),
+        ("scaling_*.b".into(), prefixed("scaling_")),
+        ("offsets_*.b".into(), prefixed("offsets_")),
+        (
+            "patched_infos.npy".into(),
+            size(bs.join("patched_infos.npy")),
+        ),
+    ]
+}
+
+/// The byte table of an `AHAC` chunk against the reference's files, and the largest difference
+/// of the values we decode from the reference decoder's (the ingest's).
+fn ahac_report(
+    dir: &Path,
+    h: &dlgs::chunks::ahac::HacAnchors,
+    sizes: &dlgs::chunks::ahac::AhacSizes,
+    reference: &ScaffoldCanonical,
+    ms: f64,
+) {
+    let r = reference_anchor_files(dir);
+    // mlp_grid in mlps.pth: its float32 parameters (the share of the pickle's tensor data).
+    let mlp_ref = 4
+        * (h.context.w1.len() + h.context.b1.len() + h.context.w2.len() + h.context.b2.len())
+            as u64;
+    let rows: [(&str, u64, String); 6] = [
+        (
+            "positions",
+            sizes.positions as u64,
+            format!("{} {}", r[0].0, r[0].1),
+        ),
+        (
+            "grids",
+            sizes.grids as u64,
+            format!("{} {}", r[1].0, r[1].1),
+        ),
+        (
+            "mlp_grid",
+            sizes.mlp as u64,
+            format!("mlps.pth share (f32 raw) {mlp_ref}"),
+        ),
+        (
+            "feature",
+            sizes.streams[0] as u64,
+            format!("{} {}", r[2].0, r[2].1),
+        ),
+        (
+            "log-scaling",
+            sizes.streams[1] as u64,
+            format!("{} {}", r[3].0, r[3].1),
+        ),
+        (
+            "offsets",
+            sizes.streams[2] as u64,
+            format!("{} {}", r[4].0, r[4].1),
+        ),
+    ];
+    let head = sizes.header + sizes.batch_headers;
+    let ours: u64 = rows.iter().map(|r| r.1).sum::<u64>() + head as u64;
+    let theirs: u64 = r.iter().map(|x| x.1).sum::<u64>() + mlp_ref;
+    println!(
+        "AHAC ({} anchors, encoded in {ms:.0} ms): part, ours, reference",
+        h.quantized.len()
+    );
+    for (name, b, rf) in &rows {
+        println!("  {name:<12} {b:>9}   {rf}");
+    }
+    println!(
+        "  {:<12} {head:>9}   {} {} (ours: header, batch headers)",
+        "headers", r[5].0, r[5].1
+    );
+    println!(
+        "  {:<12} {ours:>9}   {theirs} ({:.1} %)",
+        "total",
+        100.0 * ours as f64 / theirs.max(1) as f64
+    );
+    let ours = h.canonical();
+    let diff = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max)
+    };
+    let both = |f: fn(&dlgs::model::scaffold::Anchors) -> &[f32]| {
+        diff(f(&ours.statics), f(&reference.statics))
+            .max(diff(f(&ours.dynamics), f(&reference.dynamics)))
+    };
+    println!(
+        "  max |ours - reference decoder|: feature {:e}, log-scaling {:e}, offsets {:e}, positions {:e}",
+        both(|a| &a.features),
+        both(|a| &a.log_scalings),
+        both(|a| &a.offsets),
+        {
+            let p = |a: &dlgs::model::scaffold::Anchors| -> Vec<f32> {
+                a.positions.iter().flatten().copied().collect()
+            };
+            diff(&p(&ours.statics), &p(&reference.statics))
+                .max(diff(&p(&ours.dynamics), &p(&reference.dynamics)))
+        }
+    );
+}
+
+/// `dlgs ahac-bench`: decode times of `AHAC` payloads (median of `repeat`), 1 and 2 threads.
+pub fn run_ahac_bench(run: &Path, ply: Option<&Path>, anchors: usize, repeat: usize) -> Result<()> {
+    let dirs = hac_gops(&[run.to_path_buf()]).context("not a HAC run")?;
+    let g = hac::read_gop(&dirs[0], None, HacLimits::default())?;
+    let fixture = g.hac_anchors().context("GOP 0 has no anchors")?;
+    let mut cases = vec![("reference run GOP 0".to_string(), fixture.clone())];
+    if let Some(p) = ply {
+        let data = std::fs::read(p).with_context(|| p.display().to_string())?;
+        let t = std::time::Instant::now();
+        let s = hac::synthetic::synthetic_anchors(&fixture, &data, anchors, 1)
+            .context("the scene does not give that many voxels")?;
+        println!(
+            "synthetic content built in {:.1} s",
+            t.elapsed().as_secs_f64()
+        );
+        cases.push((format!("synthetic, positions from {}", p.display()), s));
+    }
+    for (name, h) in cases {
+        let scene = scaffold_scene(h.n_static, h.n_dynamic, true, 30, 60, 10, 60);
+        let (payload, sizes) = dlgs::chunks::ahac::encode(&h, &scene, 19)?;
+        println!(
+            "{name}: {} anchors, {} bytes ({} in the symbol streams)",
+            h.quantized.len(),
+            payload.len(),
+            sizes.streams.iter().sum::<usize>()
+        );
+        let mut cpu = Vec::new();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()?;
+            let mut ms: Vec<f64> = (0..repeat.max(1))
+                .map(|_| {
+                    pool.install(|| {
+                        let (t, c) = (std::time::Instant::now(), cpu_ms());
+                        let r = dlgs::chunks::ahac::decode(
+                            &payload,
+                            0,
+                            &scene,
+                            &dlgs::Limits::default(),
+                        );
+                        let dt = t.elapsed().as_secs_f64() * 1e3;
+                        r.map(|_| (dt, cpu_ms() - c))
+                    })
+                })
+                .collect::<dlgs::Result<Vec<(f64, f64)>>>()?
+                .into_iter()
+                .map(|(w, c)| {
+                    cpu.push(c);
+                    w
+                })
+                .collect();
+            ms.sort_by(f64::total_cmp);
+            cpu.sort_by(f64::total_cmp);
+            println!(
+                "  decode on {threads} thread(s): wall median {:.1} ms (min {:.1}, max {:.1}); \
+                 process CPU median {:.0} ms (load average {})",
+                ms[ms.len() / 2],
+                ms[0],
+                ms[ms.len() - 1],
+                cpu[cpu.len() / 2],
+                std::fs::read_to_string("/proc/loadavg")
+                    .unwrap_or_default()
+                    .split(' ')
+                    .next()
+                    .unwrap_or("?")
+            );
+            cpu.clear();
+        }
+    }
+    Ok(())
+}
+
+/// This process's user + system CPU time in ms (Linux `/proc/self/stat`, 10 ms ticks; 0
+/// elsewhere).
+fn cpu_ms() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let f: Vec<&str> = s
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let tick = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (tick(11) + tick(12)) * 10.0
 }

@@ -52,6 +52,21 @@ enum Cmd {
     },
     /// Read every chunk of a .dlgs file and check every CRC and index entry.
     Verify { file: PathBuf },
+    /// Time the decode of HAC-coded anchors (`AHAC`, format-spec §6.13): GOP 0 of a reference
+    /// HAC run, and a synthetic one of `--anchors` anchors (real positions voxelised from
+    /// `--ply`, symbols drawn from the run's context model), on 1 and 2 threads.
+    #[command(hide = true)]
+    AhacBench {
+        /// A reference HAC run (e.g. tests/fixtures/scaffold_run).
+        run: PathBuf,
+        #[arg(long)]
+        ply: Option<PathBuf>,
+        #[arg(long, default_value_t = 100_000)]
+        anchors: usize,
+        /// Decodes per thread count (the median is reported).
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+    },
     /// Encode a splat scene (PLY, .splat, SPZ, PlayCanvas SOG) into a single-frame .dlgs
     /// (`--quality high` by default: 41-68 dB against the source on the real scenes;
     /// `--quality lossless` keeps every float), re-encode a .dlgs stream with other settings (lossless canonical by default),
@@ -238,6 +253,12 @@ fn main() -> Result<()> {
             channels,
         } => info::run_info(&file, json, channels),
         Cmd::Verify { file } => info::run_verify(&file),
+        Cmd::AhacBench {
+            run,
+            ply,
+            anchors,
+            repeat,
+        } => hac_ingest_cmd::run_ahac_bench(&run, ply.as_deref(), anchors, repeat),
         Cmd::Encode {
             input,
             fps,
@@ -263,6 +284,8 @@ fn main() -> Result<()> {
                     fps,
                     codec.exact_features,
                     residual_mode.as_deref(),
+                    codec.raw_anchors,
+                    codec.anchor_step_scale,
                 )
             } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)

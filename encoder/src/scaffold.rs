@@ -1,12 +1,13 @@
-//! Writing Scaffold-GS files (`HEAD.variant = 1`, format-spec §6.9-§6.12): per GOP its raw
-//! anchors (`ANCR`), view MLPs (`AMLP`) and, with dynamic anchors, their deformation (`ADEF`)
+//! Writing Scaffold-GS files (`HEAD.variant = 1`, format-spec §6.9-§6.13): per GOP its raw
+//! anchors (`ANCR`) or HAC-coded ones (`AHAC`), view MLPs (`AMLP`) and, with dynamic anchors, their deformation (`ADEF`)
 //! and key time features (`TFEA`, exact or 12-bit HEVC). In a sequential scene (since 1.17)
 //! GOPs after the first carry an anchor residual (`RNTC`) instead of `ANCR`, and their view
 //! MLPs are inherited, or only the language MLP is sent.
 
 use std::io::Write;
 
-use dlgs::chunks::rntc;
+use dlgs::chunks::ahac::{AhacSizes, HacAnchors};
+use dlgs::chunks::{ahac, rntc};
 use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::chunks::{adef, amlp, ancr};
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
@@ -98,16 +99,42 @@ impl<W: Write> ScaffoldWriter<W> {
         dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
     ) -> Result<()> {
         let s = self.writer.scene().clone();
+        let anchors = ancr::encode(canonical, &s, self.zstd_level)?;
+        self.push_intra(ChunkType::ANCR, &anchors, mlps, dynamic)
+    }
+
+    /// As [`Self::push_gop`], with the anchors HAC-coded (`AHAC`, §6.13) in place of `ANCR`.
+    /// Returns the sizes of the `AHAC` parts.
+    pub fn push_gop_hac(
+        &mut self,
+        anchors: &HacAnchors,
+        mlps: &ScaffoldMlps,
+        dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
+    ) -> Result<AhacSizes> {
+        let s = self.writer.scene().clone();
+        let (payload, sizes) = ahac::encode(anchors, &s, self.zstd_level)?;
+        self.push_intra(ChunkType::AHAC, &payload, mlps, dynamic)?;
+        Ok(sizes)
+    }
+
+    /// An intra GOP with its anchors chunk (`ANCR` or `AHAC`) already coded.
+    fn push_intra(
+        &mut self,
+        anchors_type: ChunkType,
+        anchors: &[u8],
+        mlps: &ScaffoldMlps,
+        dynamic: Option<(&AnchorDeformation, &TfeaBody)>,
+    ) -> Result<()> {
         if self.has_reference() {
             return Err(Error::input(
                 "in a sequential Scaffold-GS scene this GOP is a residual GOP (push_residual_gop)",
             ));
         }
         mlps.check().map_err(Error::input)?;
-        let anchors = ancr::encode(canonical, &s, self.zstd_level)?;
+        let s = self.writer.scene().clone();
         let view = amlp::encode(mlps, &s, self.zstd_level)?;
         let dyn_chunks = self.dynamic_chunks(dynamic)?;
-        self.write_gop(ChunkType::ANCR, &anchors, Some(&view), dyn_chunks)
+        self.write_gop(anchors_type, anchors, Some(&view), dyn_chunks)
     }
 
     /// Append the next GOP as a residual GOP (sequential scenes, GOP 1 on; format-spec §6.6,

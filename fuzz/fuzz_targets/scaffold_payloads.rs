@@ -1,4 +1,4 @@
-//! The Scaffold-GS parsers (ANCR, AMLP, ADEF; since 1.17 RNTC over anchor groups and
+//! The Scaffold-GS parsers (ANCR, AMLP, ADEF, AHAC; since 1.17 RNTC over anchor groups and
 //! language-only AMLP) directly against a fixed variant-1 scene header, and whole Scaffold-GS
 //! files through the random-access decoder (every GOP, so residual chains too); what decodes is
 //! turned into a frame (anchor deformation and neural Gaussians) or applied to anchors, so the
@@ -41,7 +41,7 @@ fuzz_target!(|data: &[u8]| {
     let s = scene();
     let limits = dlgs::Limits::tiny();
     let (sel, body) = data.split_first().unwrap_or((&0, &[]));
-    match sel % 4 {
+    match sel % 5 {
         0 => {
             if let Ok(c) = dlgs::chunks::ancr::decode(body, 0, &s, &limits) {
                 let _ = dlgs_decoder::scaffold::anchor_reach(&c.statics);
@@ -81,6 +81,11 @@ fuzz_target!(|data: &[u8]| {
                 a.log_scalings = vec![-2.0; 6];
                 let f = dlgs::model::TimeFeatures { n: 1, keys: 7, channels: 16, data: vec![0.25; 7 * 16] };
                 let _ = dlgs_decoder::scaffold::deform_anchors(&a, &f, 2, 0.5, &d.mlps, (d.bound_min, d.bound_max));
+            }
+        }
+        4 => {
+            if let Ok(c) = dlgs::chunks::ahac::decode(body, 0, &s, &limits) {
+                let _ = dlgs_decoder::scaffold::anchor_reach(&c.statics);
             }
         }
         _ => {

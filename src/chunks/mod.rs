@@ -5,6 +5,7 @@
 //! [`crate::entropy`].
 
 pub mod adef;
+pub mod ahac;
 pub mod amlp;
 pub mod ancr;
 pub mod craw;

@@ -35,24 +35,19 @@ fn segment_lengths(c: &NtcConfig) -> Vec<usize> {
     v
 }
 
+/// The shared-count groups of scope 1: the plane levels, then the gate.
+fn grid_groups(n: usize) -> Vec<u8> {
+    let mut g = vec![0u8; n - 1];
+    g.push(1);
+    g
+}
+
 /// Per segment probability of a 1 bit under `scope`.
 fn probabilities(ones: &[u64], lens: &[usize], scope: FrequencyScope) -> Vec<u32> {
-    let planes = lens.len() - 1;
     match scope {
-        FrequencyScope::Segment => ones
-            .iter()
-            .zip(lens)
-            .map(|(&o, &n)| binary_bits::probability_of_one(o, n as u64))
-            .collect(),
+        FrequencyScope::Segment => binary_bits::segment_probabilities(ones, lens, None),
         FrequencyScope::Grid => {
-            let po: u64 = ones[..planes].iter().sum();
-            let pn: u64 = lens[..planes].iter().map(|&n| n as u64).sum();
-            let mut p = vec![binary_bits::probability_of_one(po, pn); planes];
-            p.push(binary_bits::probability_of_one(
-                ones[planes],
-                lens[planes] as u64,
-            ));
-            p
+            binary_bits::segment_probabilities(ones, lens, Some(&grid_groups(lens.len())))
         }
     }
 }
@@ -62,18 +57,12 @@ fn code_segments(
     ones: &[u64],
     scope: FrequencyScope,
 ) -> Vec<Vec<u32>> {
-    let lens: Vec<usize> = segs.iter().map(|s| s.len()).collect();
-    let p = probabilities(ones, &lens, scope);
-    segs.par_iter()
-        .enumerate()
-        .map(|(i, s)| {
-            if ones[i] == 0 || ones[i] == lens[i] as u64 {
-                Vec::new()
-            } else {
-                binary_bits::encode(s, p[i])
-            }
-        })
-        .collect()
+    match scope {
+        FrequencyScope::Segment => binary_bits::encode_segments(segs, ones, None),
+        FrequencyScope::Grid => {
+            binary_bits::encode_segments(segs, ones, Some(&grid_groups(segs.len())))
+        }
+    }
 }
 
 /// One row of [`grid_report`].
@@ -282,33 +271,8 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         .par_iter()
         .enumerate()
         .map(|(i, &(at, b))| {
-            let n = lens[i];
-            if ones[i] == 0 || ones[i] == n as u64 {
-                return Ok(BitVec::repeat(ones[i] != 0, n));
-            }
-            let words = b
-                .chunks_exact(4)
-                .map(|w| u32::from_le_bytes(w.try_into().expect("4 bytes")))
-                .collect();
-            let bits = binary_bits::decode(words, n, probs[i]).ok_or_else(|| {
-                Error::payload(
-                    ChunkType::RNTC,
-                    format!("segment {i}: invalid range-coder stream"),
-                    at,
-                )
-            })?;
-            if bits.count_ones() as u64 != ones[i] {
-                return Err(Error::payload(
-                    ChunkType::RNTC,
-                    format!(
-                        "segment {i} decodes to {} ones, {} stored",
-                        bits.count_ones(),
-                        ones[i]
-                    ),
-                    at,
-                ));
-            }
-            Ok(bits)
+            binary_bits::decode_segment(b, lens[i], ones[i], probs[i])
+                .map_err(|e| Error::payload(ChunkType::RNTC, format!("segment {i}: {e}"), at))
         })
         .collect::<Result<_>>()?;
     // The output width follows from the groups (of Gaussians or, in a Scaffold-GS scene, of

@@ -31,6 +31,8 @@ impl ChunkType {
     pub const AMLP: ChunkType = ChunkType(*b"AMLP");
     /// Anchor deformation MLPs and box of a Scaffold-GS GOP, §6.11.
     pub const ADEF: ChunkType = ChunkType(*b"ADEF");
+    /// Canonical anchors of a Scaffold-GS GOP, HAC-coded, §6.13.
+    pub const AHAC: ChunkType = ChunkType(*b"AHAC");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes
@@ -71,6 +73,7 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::ANCR,
     ChunkType::AMLP,
     ChunkType::ADEF,
+    ChunkType::AHAC,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

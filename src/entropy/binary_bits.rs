@@ -8,8 +8,8 @@
 
 use bitvec::prelude::*;
 use constriction::stream::model::ContiguousCategoricalEntropyModel;
-use constriction::stream::queue::{DefaultRangeDecoder, DefaultRangeEncoder};
-use constriction::stream::{Decode, Encode};
+use constriction::stream::queue::DefaultRangeEncoder;
+use constriction::stream::Encode;
 
 /// Probability precision of the two-symbol model.
 pub const PRECISION: usize = 24;
@@ -37,8 +37,26 @@ pub fn encode(bits: &BitSlice<u64, Lsb0>, p1: u32) -> Vec<u32> {
     enc.into_compressed().expect("in-memory backend")
 }
 
-/// Decode `n` bits; `None` if the words are not a valid stream for this model.
+/// Decode `n` bits; `None` if the words are not a valid stream for this model. The decoder of
+/// Appendix A specialised to the two-symbol model (`BinaryRangeDecoder::binary24`); the same
+/// bits and errors as `constriction`'s (test `fast_decode_agrees_with_constriction`).
 pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
+    let p0 = (1u32 << PRECISION) - p1;
+    let mut dec = super::binary_range_decoder::BinaryRangeDecoder::new(words);
+    let mut raw = vec![0u64; n.div_ceil(64)];
+    for i in 0..n {
+        raw[i / 64] |= (dec.binary24(p0).ok()? as u64) << (i % 64);
+    }
+    let mut out = BitVec::from_vec(raw);
+    out.truncate(n);
+    Some(out)
+}
+
+/// [`decode`] with `constriction`'s generic decoder (the reference for the test).
+#[cfg(test)]
+fn decode_constriction(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
+    use constriction::stream::queue::DefaultRangeDecoder;
+    use constriction::stream::Decode;
     let m = model(p1);
     let mut dec = DefaultRangeDecoder::from_compressed(words).ok()?;
     // Assemble whole words instead of pushing bit by bit.
@@ -49,6 +67,74 @@ pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
     let mut out = BitVec::from_vec(raw);
     out.truncate(n);
     Some(out)
+}
+
+/// Per segment probability of a 1 bit (§6.6.3, §6.13.4): with `groups` `None` each segment's
+/// own count of ones over its own size; with `Some(g)` the counts and sizes summed over every
+/// segment of the same group label `g[i]`.
+pub fn segment_probabilities(ones: &[u64], lens: &[usize], groups: Option<&[u8]>) -> Vec<u32> {
+    match groups {
+        None => ones
+            .iter()
+            .zip(lens)
+            .map(|(&o, &n)| probability_of_one(o, n as u64))
+            .collect(),
+        Some(g) => (0..ones.len())
+            .map(|i| {
+                let same = (0..ones.len()).filter(|&j| g[j] == g[i]);
+                let o: u64 = same.clone().map(|j| ones[j]).sum();
+                let n: u64 = same.map(|j| lens[j] as u64).sum();
+                probability_of_one(o, n)
+            })
+            .collect(),
+    }
+}
+
+/// Code every segment with the probabilities of [`segment_probabilities`]; a constant segment
+/// (all 0 or all 1) codes to no words. Segments are coded in parallel.
+pub fn encode_segments(
+    segs: &[&BitSlice<u64, Lsb0>],
+    ones: &[u64],
+    groups: Option<&[u8]>,
+) -> Vec<Vec<u32>> {
+    use rayon::prelude::*;
+    let lens: Vec<usize> = segs.iter().map(|s| s.len()).collect();
+    let p = segment_probabilities(ones, &lens, groups);
+    segs.par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            if ones[i] == 0 || ones[i] == lens[i] as u64 {
+                Vec::new()
+            } else {
+                encode(s, p[i])
+            }
+        })
+        .collect()
+}
+
+/// Decode one segment of `n` bits holding `ones` 1 bits with probability `p1` (the rules of
+/// §6.6.3: constant segments have no words; the decoded count of ones must match).
+pub fn decode_segment(
+    words: &[u8],
+    n: usize,
+    ones: u64,
+    p1: u32,
+) -> std::result::Result<BitVec<u64, Lsb0>, String> {
+    if ones == 0 || ones == n as u64 {
+        return Ok(BitVec::repeat(ones != 0, n));
+    }
+    let w = words
+        .chunks_exact(4)
+        .map(|w| u32::from_le_bytes(w.try_into().expect("4 bytes")))
+        .collect();
+    let bits = decode(w, n, p1).ok_or("invalid range-coder stream")?;
+    if bits.count_ones() as u64 != ones {
+        return Err(format!(
+            "decodes to {} ones, {ones} stored",
+            bits.count_ones()
+        ));
+    }
+    Ok(bits)
 }
 
 /// Shannon bound `n * H(ones / n)` in bits.
@@ -64,6 +150,36 @@ pub fn entropy_bits(ones: u64, n: u64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_decode_agrees_with_constriction() {
+        let mut rng = fastrand::Rng::with_seed(17);
+        let mut errors = 0;
+        for case in 0..4000 {
+            let p1 = match case % 4 {
+                0 => 1,
+                1 => (1 << PRECISION) - 1,
+                _ => rng.u32(1..1 << PRECISION),
+            };
+            let n = rng.usize(0..300);
+            let words: Vec<u32> = if case % 2 == 0 {
+                (0..rng.usize(0..12))
+                    .map(|_| match rng.u8(0..4) {
+                        0 => 0,
+                        1 => u32::MAX,
+                        _ => rng.u32(..),
+                    })
+                    .collect()
+            } else {
+                let bits: BitVec<u64, Lsb0> = (0..n).map(|_| rng.bool()).collect();
+                encode(&bits, p1)
+            };
+            let a = decode(words.clone(), n, p1);
+            errors += a.is_none() as usize;
+            assert_eq!(a, decode_constriction(words, n, p1), "case {case}");
+        }
+        assert!(errors > 10, "{errors} garbage streams stopped at an error");
+    }
 
     #[test]
     fn round_trip_near_entropy() {

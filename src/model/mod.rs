@@ -2,10 +2,13 @@
 
 pub mod dynamic;
 pub mod gaussians;
+pub mod hac_cdf;
+pub mod hac_context;
 pub mod lang_decoder;
 pub mod ntc;
 mod ntc_config;
 mod ntc_lanes;
+mod phi_table;
 pub mod residual;
 pub mod scaffold;
 

@@ -1,13 +1,13 @@
 //! Random-access decoding of Scaffold-GS files (`HEAD.variant = 1`; format-spec §6.9-§6.12):
-//! a GOP's anchors (`ANCR`, or in a sequential scene from GOP 1 on an `RNTC` residual against
-//! the previous GOP's decoded anchors), view MLPs (`AMLP`, inherited along the chain when a
-//! residual GOP omits it) and, with dynamic anchors, their time features (`TFEA`) and
-//! deformation (`ADEF`); a frame is the neural Gaussians one camera sees at a time.
+//! a GOP's anchors (`ANCR` or HAC-coded `AHAC`, or in a sequential scene from GOP 1 on an
+//! `RNTC` residual against the previous GOP's decoded anchors), view MLPs (`AMLP`, inherited
+//! along the chain when a residual GOP omits it) and, with dynamic anchors, their time features
+//! (`TFEA`) and deformation (`ADEF`); a frame is the neural Gaussians one camera sees at a time.
 
 use std::io::{Read, Seek};
 use std::sync::Arc;
 
-use dlgs::chunks::{adef, amlp, ancr, rntc};
+use dlgs::chunks::{adef, ahac, amlp, ancr, rntc};
 use dlgs::container::header::Variant;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::scaffold::{AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps};
@@ -258,18 +258,38 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
             Ok((self.reader.payload(&c)?, c.payload_offset()))
         };
         let Some(reference) = reference else {
-            let (p, o) = read(ChunkType::ANCR)?;
-            let canonical =
-                ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?;
+            // Exactly one of ANCR (§6.9) and AHAC (§6.13).
+            let canonical = match (
+                find(&chunks, ChunkType::ANCR),
+                find(&chunks, ChunkType::AHAC),
+            ) {
+                (Some(_), Some(c)) => {
+                    return Err(Error::payload(
+                        ChunkType::AHAC,
+                        "a GOP holds both ANCR and AHAC",
+                        c.payload_offset(),
+                    ))
+                }
+                (None, Some(_)) => {
+                    let (p, o) = read(ChunkType::AHAC)?;
+                    ahac::decode(&p, o, &scene, &limits)
+                        .map_err(|e| e.in_chunk(ChunkType::AHAC))?
+                }
+                _ => {
+                    let (p, o) = read(ChunkType::ANCR)?;
+                    ancr::decode(&p, o, &scene, &limits)
+                        .map_err(|e| e.in_chunk(ChunkType::ANCR))?
+                }
+            };
             let (p, o) = read(ChunkType::AMLP)?;
             let mlps =
                 amlp::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AMLP))?;
             return Ok(GopState { canonical, mlps });
         };
         // A residual GOP (§6.12): an RNTC over anchor groups, no canonical chunk.
-        if let Some(c) = find(&chunks, ChunkType::ANCR) {
+        if let Some(c) = find(&chunks, ChunkType::ANCR).or_else(|| find(&chunks, ChunkType::AHAC)) {
             return Err(Error::format(
-                FormatErrorKind::Order("a residual Scaffold-GS GOP holds RNTC, not ANCR"),
+                FormatErrorKind::Order("a residual Scaffold-GS GOP holds RNTC, not ANCR or AHAC"),
                 c.offset,
             ));
         }

@@ -152,6 +152,8 @@ pub fn reencodes_to(
 pub struct GaussianDecode {
     /// `(sym + min) * Q`, anchor-major.
     pub values: Vec<f32>,
+    /// The integers `sym + min` (`round(x / Q)` of the reference's encoder), anchor-major.
+    pub symbols: Vec<i32>,
     /// Chunks whose decode re-encodes to their bytes exactly, of all chunks.
     pub verified_chunks: usize,
     pub chunks: usize,
@@ -270,6 +272,7 @@ pub fn decode_gaussian(
             let g = base + i;
             out.values
                 .push((s as f32 + mn) * qs[g / channels - a_first]);
+            out.symbols.push(s as i32 + mni);
         }
     }
     Ok(out)

@@ -27,6 +27,8 @@ pub mod grid;
 pub mod npy;
 pub mod ntc;
 mod repair;
+pub mod synthetic;
+mod to_ahac;
 
 use std::path::Path;
 
@@ -100,6 +102,11 @@ pub struct HacGop {
     pub hash_bits: Vec<bool>,
     /// The context model's outputs per attribute (feat, scaling, offsets) (GOP 0).
     pub context: Option<[AttrContext; 3]>,
+    /// The coded integers `round(x / Q)` per attribute (feat, scaling, offsets), anchor-major
+    /// (GOP 0; empty for a later GOP).
+    pub symbols: [Vec<i32>; 3],
+    /// Anchors per coded batch (`patched_infos.npy`; GOP 0).
+    pub batch: usize,
     /// How the Gaussian-coded files decoded (GOP 0).
     pub report: DecodeReport,
     pub mlps: HacMlps,
@@ -248,7 +255,9 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
         ..Default::default()
     };
     let mut report = DecodeReport::default();
+    let mut symbols: [Vec<i32>; 3] = Default::default();
     for (&(s, attr), d) in jobs.iter().zip(decoded) {
+        symbols[attr as usize].extend_from_slice(&d.symbols);
         report.chunks += d.chunks;
         let file = format!("{}_{s}_0.b", attr.name());
         report
@@ -277,6 +286,8 @@ fn read_base(bs: &Path, mlps: HacMlps, limits: HacLimits) -> Result<HacGop, Inge
         bound_max: bmax,
         hash_bits,
         context: Some(ctx),
+        symbols,
+        batch: infos.batch,
         report,
         mlps,
         ntc: None,
@@ -327,6 +338,8 @@ fn read_ntc(bs: &Path, prev: &HacGop, mlps: HacMlps) -> Result<HacGop, IngestErr
         bound_max: prev.bound_max,
         hash_bits: Vec::new(),
         context: None,
+        symbols: Default::default(),
+        batch: prev.batch,
         report: DecodeReport::default(),
         mlps,
         ntc: Some(NtcResidual {

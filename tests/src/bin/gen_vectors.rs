@@ -88,7 +88,7 @@ language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened
         "# name expect (valid: frames in valid/NAME.frames.f32; invalid: the error a reader gives)\n",
     );
     readme.push_str(
-        "\n## Scaffold-GS (variant 1, since 1.16)\n\n| file | expect | what |\n|---|---|---|\n",
+        "\n## Scaffold-GS (variant 1, since 1.16; AHAC since 1.17)\n\n| file | expect | what |\n|---|---|---|\n",
     );
     for v in dlgs_tests::vectors::scaffold::all() {
         let dir = if v.error.is_some() {
@@ -120,13 +120,14 @@ language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened
     }
     std::fs::write(root.join("expected-scaffold.txt"), scaffold).unwrap();
     readme.push_str(&format!(
-        "\n`valid/{name}.frames.f32` holds what a decoder must produce (format-spec/dlgs.md §6.12) at t = {times:?} s \
+        "\n`valid/{name}.frames.f32` and `valid/{ahac}.frames.f32` hold what a decoder must produce (format-spec/dlgs.md §6.12) at t = {times:?} s \
 for the camera centre {cam:?}, language decoded: per time, the number of neural Gaussians (as an f32), then for \
 each, in anchor then offset order, position (3), scale (3), unit quaternion w x y z (4), RGB (3), colour opacity (1), \
 language opacity (1), language (9); f32 little-endian. A decoder conforms if the counts are equal and every value \
 is within 2e-4 (absolute); the reference decoder reproduces every value bit for bit on every platform. \
 `valid/{res}.frames.f32` (since 1.17) is the same at t = {rtimes:?} s, all in its residual GOP 1.\n",
         name = dlgs_tests::vectors::scaffold::VALID,
+        ahac = dlgs_tests::vectors::scaffold::AHAC_VALID,
         times = dlgs_tests::vectors::scaffold::TIMES,
         cam = dlgs_tests::vectors::scaffold::CAMERA,
         res = dlgs_tests::vectors::scaffold::RESIDUAL,

@@ -97,6 +97,83 @@ fn model() -> (
     (canonical, mlps, deformation, features)
 }
 
+pub const AHAC_VALID: &str = "scaffold-ahac-tiny";
+
+/// `AHAC` content (§6.13) for the tiny model's 3 anchors: positions quantised from the 3 real
+/// points in a box around them, one-level grids (3D: R 5, 2^4 entries; planes: R 6, 2^5; 2
+/// features), `mlp_grid` 8 -> 4 -> 175, generated weights and integers, batches of 2.
+pub fn hac_anchors() -> dlgs::chunks::ahac::HacAnchors {
+    use dlgs::model::hac_context::{GridShape, HacContext, CONTEXT_OUT};
+    let (c, _, d, _) = model();
+    let mut rng = fastrand::Rng::with_seed(53);
+    let shape = |r: u32, log2: u8| GridShape {
+        resolutions: vec![r],
+        log2_table: log2,
+        features: 2,
+    };
+    let (grid3, grid2) = (shape(5, 4), shape(6, 5));
+    let levels = HacContext::level_bits(&grid3, &grid2)
+        .into_iter()
+        .map(|n| (0..n).map(|_| rng.bool()).collect())
+        .collect();
+    let (inputs, hidden) = (8, 4);
+    let mut w = |n: usize, s: f32, b: f32| (0..n).map(|_| (rng.f32() - 0.5) * s + b).collect();
+    let (bmin, bmax) = (d.bound_min, d.bound_max);
+    let quantized = c
+        .statics
+        .positions
+        .iter()
+        .chain(&c.dynamics.positions)
+        .map(|p| std::array::from_fn(|a| ((p[a] - bmin[a]) / (bmax[a] - bmin[a]) * 65535.0) as u16))
+        .collect();
+    let context = HacContext {
+        grid3,
+        grid2,
+        bound_min: bmin,
+        bound_max: bmax,
+        q_base: [0.25, 0.001, 0.05],
+        levels,
+        hidden,
+        w1: w(inputs * hidden, 2.0, 0.0),
+        b1: w(hidden, 0.5, 0.2),
+        w2: w(hidden * CONTEXT_OUT, 0.5, 0.0),
+        b2: w(CONTEXT_OUT, 0.5, 0.5),
+    };
+    let mut s = |n: usize, lo: i32, hi: i32| (0..3 * n).map(|_| rng.i32(lo..=hi)).collect();
+    dlgs::chunks::ahac::HacAnchors {
+        n_static: 2,
+        n_dynamic: 1,
+        batch: 2,
+        context,
+        quantized,
+        symbols: [
+            s(FEAT_DIM, -4, 4),
+            s(SCALING_DIM, -3100, -2900),
+            s(3 * N_OFFSETS, -9, 9),
+        ],
+    }
+}
+
+/// The tiny model with its anchors in `AHAC` instead of `ANCR`.
+pub fn ahac_bytes() -> Vec<u8> {
+    let (_, m, d, f) = model();
+    let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
+    let mut w = ScaffoldWriter::new(Vec::new(), scene, 19).unwrap();
+    w.push_gop_hac(&hac_anchors(), &m, Some((&d, &TfeaBody::Exact(f))))
+        .unwrap();
+    w.finish().unwrap()
+}
+
+/// Offset of batch header `k` (batches x attributes) in the `AHAC` payload: the headers end
+/// where the streams start, and the streams end the payload.
+fn ahac_batch_header(payload_len: usize, k: usize) -> usize {
+    let h = hac_anchors();
+    let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
+    let (_, sizes) = dlgs::chunks::ahac::encode(&h, &scene, 19).unwrap();
+    let nb = 2; // 3 anchors in batches of 2
+    payload_len - sizes.streams.iter().sum::<usize>() - 36 * nb + 12 * k
+}
+
 pub fn valid_bytes() -> Vec<u8> {
     let (c, m, d, f) = model();
     let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
@@ -252,7 +329,33 @@ fn patch_head(bytes: &[u8], f: impl Fn(&mut [u8])) -> Vec<u8> {
 pub fn all() -> Vec<Vector> {
     let good = valid_bytes();
     let residual = residual_bytes();
+    let ahac = ahac_bytes();
     vec![
+        Vector {
+            name: AHAC_VALID,
+            bytes: ahac.clone(),
+            error: None,
+            about: "scaffold-tiny with its anchors HAC-coded (AHAC, since 1.17): the 3 real points quantised, one-level binary grids, mlp_grid 8->4->175, generated integers in batches of 2 (one log-scaling alphabet of ~200); its frames in scaffold-ahac-tiny.frames.f32",
+        },
+        Vector {
+            name: "x-ahac-alphabet",
+            bytes: patch(&ahac, b"AHAC", |p| {
+                let at = ahac_batch_header(p.len(), 0);
+                p[at + 4..at + 8].copy_from_slice(&70_000i32.to_le_bytes());
+            }),
+            error: Some("Payload"),
+            about: "scaffold-ahac-tiny with batch 0's feature alphabet over 2^16 (hi = 70000)",
+        },
+        Vector {
+            name: "x-ahac-stream-bytes",
+            bytes: patch(&ahac, b"AHAC", |p| {
+                let at = ahac_batch_header(p.len(), 1) + 8;
+                let b = u32::from_le_bytes(p[at..at + 4].try_into().unwrap());
+                p[at..at + 4].copy_from_slice(&(b + 2).to_le_bytes());
+            }),
+            error: Some("Payload"),
+            about: "scaffold-ahac-tiny with batch 0's log-scaling stream length not a multiple of 4",
+        },
         Vector {
             name: VALID,
             bytes: good.clone(),
