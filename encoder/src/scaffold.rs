@@ -7,9 +7,9 @@
 use std::io::Write;
 
 use dlgs::chunks::ahac::{AhacSizes, HacAnchors};
-use dlgs::chunks::{ahac, rntc};
 use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::chunks::{adef, amlp, ancr};
+use dlgs::chunks::{ahac, rntc};
 use dlgs::container::header::{DeformModel, ResidualMode, Variant};
 use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
 use dlgs::model::ntc::NtcField;

@@ -141,9 +141,11 @@ impl<W: Write> StreamEncoder<W> {
                     applied = f.apply(prev)?;
                     (&applied, false)
                 }
-                GopCanonical::Ntc(_) => return Err(Error::input(format!(
+                GopCanonical::Ntc(_) => {
+                    return Err(Error::input(format!(
                     "GOP {g} has no reference GOP: it needs a full canonical state, not a residual"
-                ))),
+                )))
+                }
             };
             let (ty, payload, order) = self.canonical_payload(canon, g == 0)?;
             if tracks_state {

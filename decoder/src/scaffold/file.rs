@@ -272,13 +272,11 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
                 }
                 (None, Some(_)) => {
                     let (p, o) = read(ChunkType::AHAC)?;
-                    ahac::decode(&p, o, &scene, &limits)
-                        .map_err(|e| e.in_chunk(ChunkType::AHAC))?
+                    ahac::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AHAC))?
                 }
                 _ => {
                     let (p, o) = read(ChunkType::ANCR)?;
-                    ancr::decode(&p, o, &scene, &limits)
-                        .map_err(|e| e.in_chunk(ChunkType::ANCR))?
+                    ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?
                 }
             };
             let (p, o) = read(ChunkType::AMLP)?;
