@@ -13,9 +13,7 @@ use anyhow::{bail, Context, Result};
 use dlgs::chunks::tfea::{TfeaBody, Tiling};
 use dlgs::container::ChunkType;
 use dlgs::container::ResidualMode;
-use dlgs::model::scaffold::{
-    AnchorDeformation, Anchors, ScaffoldCanonical, FEAT_DIM, N_OFFSETS, SCALING_DIM,
-};
+use dlgs::model::scaffold::{AnchorDeformation, ScaffoldCanonical};
 use dlgs_encoder::scaffold::{scaffold_scene, ResidualViewMlps, ScaffoldWriter};
 use dlgs_ingest::hac::{self, HacGop, HacLimits};
 use dlgs_ingest::ref_gop::FeatureSource;
@@ -67,19 +65,6 @@ fn same_but_language(
     b: &dlgs::model::scaffold::ScaffoldMlps,
 ) -> bool {
     a.opacity == b.opacity && a.color == b.color && a.cov == b.cov
-}
-
-fn split(a: &Anchors, n_static: usize) -> ScaffoldCanonical {
-    let part = |r: std::ops::Range<usize>| Anchors {
-        positions: a.positions[r.clone()].to_vec(),
-        features: a.features[r.start * FEAT_DIM..r.end * FEAT_DIM].to_vec(),
-        offsets: a.offsets[r.start * 3 * N_OFFSETS..r.end * 3 * N_OFFSETS].to_vec(),
-        log_scalings: a.log_scalings[r.start * SCALING_DIM..r.end * SCALING_DIM].to_vec(),
-    };
-    ScaffoldCanonical {
-        statics: part(0..n_static),
-        dynamics: part(n_static..a.len()),
-    }
 }
 
 /// Bytes the reference counts for a HAC GOP (§9: the whole `bitstreams/`, the mp4,
@@ -188,7 +173,7 @@ pub fn run_hac_ingest(
                 dirs[0].display()
             );
         };
-        let canonical = split(&gop.anchors, n_static);
+        let canonical = ScaffoldCanonical::split_at(gop.anchors.clone(), n_static);
         let png = dir.join("png_quant");
         let deformation = AnchorDeformation {
             bound_min: gop.mlps.bounds.0,

@@ -65,29 +65,8 @@ impl Source {
             }
             Source::Scaffold(dec, name) => {
                 // The anchors themselves stand for the scene (bounds, camera placement).
-                let tp = dec
-                    .scene()
-                    .locate(t)
-                    .with_context(|| format!("{name} at t = {t} s"))?;
-                let gop = dec
-                    .gop(tp.gop)
-                    .with_context(|| format!("decoding GOP {} of {name}", tp.gop))?;
-                let (_, a) = gop.anchors_at(tp.key, tp.delta);
-                let lang = if dec.scene().lang_levels > 0 { 9 } else { 0 };
-                let mut g = Gaussians::new(0, lang);
-                for i in 0..a.len() {
-                    g.positions.push(a.positions[i]);
-                    let s = a.log_scaling(i);
-                    g.log_scales.push([s[3], s[4], s[5]]);
-                    g.rotations.push([1.0, 0.0, 0.0, 0.0]);
-                    g.opacity.push(0.0);
-                    g.sh.extend_from_slice(&[0.0; 3]);
-                    if lang > 0 {
-                        g.lang_opacity.push(0.0);
-                        g.lang.extend_from_slice(&[0.0; 9]);
-                    }
-                }
-                Ok(g)
+                dec.anchor_stand_ins(t)
+                    .with_context(|| format!("the anchors of {name} at t = {t} s"))
             }
         }
     }

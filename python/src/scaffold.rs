@@ -60,24 +60,7 @@ pub fn neural_at(
 /// The anchors at `t` as stand-in Gaussians (bounds and orbit cameras), as the CLI's
 /// `Source::canonical` builds them, so that orbit camera `i` is the CLI's.
 pub fn anchor_stand_ins(dec: &mut ScaffoldDec, t: f64) -> dlgs::Result<Gaussians> {
-    let tp = dec.scene().locate(t)?;
-    let lang = if dec.scene().lang_levels > 0 { 9 } else { 0 };
-    let gop = dec.gop(tp.gop)?;
-    let (_, a) = gop.anchors_at(tp.key, tp.delta);
-    let mut g = Gaussians::new(0, lang);
-    for i in 0..a.len() {
-        g.positions.push(a.positions[i]);
-        let s = a.log_scaling(i);
-        g.log_scales.push([s[3], s[4], s[5]]);
-        g.rotations.push([1.0, 0.0, 0.0, 0.0]);
-        g.opacity.push(0.0);
-        g.sh.extend_from_slice(&[0.0; 3]);
-        if lang > 0 {
-            g.lang_opacity.push(0.0);
-            g.lang.extend_from_slice(&[0.0; 9]);
-        }
-    }
-    Ok(g)
+    dec.anchor_stand_ins(t)
 }
 
 /// The MLP outputs as they are (`frame(..., neural=True)`): linear `scales`, unit

@@ -79,17 +79,13 @@ fn values(
             .map(|(k, &x)| x as f32 * q[k / c][a])
             .collect()
     };
-    let (f, s, o) = (scaled(0), scaled(1), scaled(2));
-    let part = |r: std::ops::Range<usize>| Anchors {
-        positions: positions[r.clone()].to_vec(),
-        features: f[r.start * ATTR_CHANNELS[0]..r.end * ATTR_CHANNELS[0]].to_vec(),
-        log_scalings: s[r.start * ATTR_CHANNELS[1]..r.end * ATTR_CHANNELS[1]].to_vec(),
-        offsets: o[r.start * ATTR_CHANNELS[2]..r.end * ATTR_CHANNELS[2]].to_vec(),
+    let all = Anchors {
+        features: scaled(0),
+        log_scalings: scaled(1),
+        offsets: scaled(2),
+        positions,
     };
-    ScaffoldCanonical {
-        statics: part(0..n_static),
-        dynamics: part(n_static..positions.len()),
-    }
+    ScaffoldCanonical::split_at(all, n_static)
 }
 
 impl HacAnchors {

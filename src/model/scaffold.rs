@@ -335,6 +335,21 @@ pub fn check_scene(s: &crate::container::SceneHeader) -> Result<(), String> {
 }
 
 impl ScaffoldCanonical {
+    /// Static then dynamic anchors in one set, split at `n_static` (the static rows stay in
+    /// place; only the dynamic ones move). `n_static` must be at most `all.len()`.
+    pub fn split_at(mut all: Anchors, n_static: usize) -> ScaffoldCanonical {
+        let dynamics = Anchors {
+            positions: all.positions.split_off(n_static),
+            features: all.features.split_off(n_static * FEAT_DIM),
+            offsets: all.offsets.split_off(n_static * 3 * N_OFFSETS),
+            log_scalings: all.log_scalings.split_off(n_static * SCALING_DIM),
+        };
+        ScaffoldCanonical {
+            statics: all,
+            dynamics,
+        }
+    }
+
     /// The canonical anchors `field` (an `RNTC` of a Scaffold-GS scene) makes of this reference
     /// state (format-spec §6.6.5, §6.12): each selected set's rows are evaluated at the
     /// reference's canonical positions and added, f32, to the selected groups; positions and

@@ -12,9 +12,7 @@ use std::sync::OnceLock;
 use dlgs::chunks::tfea::TfeaBody;
 use dlgs::container::ResidualMode;
 use dlgs::model::ntc::NtcField;
-use dlgs::model::scaffold::{
-    AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps, FEAT_DIM, N_OFFSETS, SCALING_DIM,
-};
+use dlgs::model::scaffold::{AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps};
 use dlgs::model::TimeFeatures;
 use dlgs_decoder::scaffold::{NeuralGaussians, ScaffoldDecoder, ViewRequest};
 use dlgs_encoder::scaffold::{scaffold_scene, ResidualViewMlps, ScaffoldWriter};
@@ -51,19 +49,6 @@ fn gops() -> &'static [HacGop; 2] {
         let g1 = hac::read_gop(&dir(1), Some(&g0), HacLimits::default()).unwrap();
         [g0, g1]
     })
-}
-
-fn split(a: &Anchors, ns: usize) -> ScaffoldCanonical {
-    let part = |r: std::ops::Range<usize>| Anchors {
-        positions: a.positions[r.clone()].to_vec(),
-        features: a.features[r.start * FEAT_DIM..r.end * FEAT_DIM].to_vec(),
-        offsets: a.offsets[r.start * 3 * N_OFFSETS..r.end * 3 * N_OFFSETS].to_vec(),
-        log_scalings: a.log_scalings[r.start * SCALING_DIM..r.end * SCALING_DIM].to_vec(),
-    };
-    ScaffoldCanonical {
-        statics: part(0..ns),
-        dynamics: part(ns..a.len()),
-    }
 }
 
 fn view_mlps(g: usize) -> ScaffoldMlps {
@@ -121,16 +106,24 @@ fn file(residual: bool, gops_n: u32) -> Vec<u8> {
     }
     let mut w = ScaffoldWriter::new(Vec::new(), scene, 3).unwrap();
     let (d, f) = dynamic(0);
-    w.push_gop(&split(&g[0].anchors, ns), &view_mlps(0), Some((&d, &f)))
-        .unwrap();
+    w.push_gop(
+        &ScaffoldCanonical::split_at(g[0].anchors.clone(), ns),
+        &view_mlps(0),
+        Some((&d, &f)),
+    )
+    .unwrap();
     let (d, f) = dynamic(1);
     for _ in 1..gops_n {
         if residual {
             w.push_residual_gop(&field(), ResidualViewMlps::Inherit, Some((&d, &f)))
                 .unwrap();
         } else {
-            w.push_gop(&split(&g[1].anchors, ns), &view_mlps(1), Some((&d, &f)))
-                .unwrap();
+            w.push_gop(
+                &ScaffoldCanonical::split_at(g[1].anchors.clone(), ns),
+                &view_mlps(1),
+                Some((&d, &f)),
+            )
+            .unwrap();
         }
     }
     w.finish().unwrap()
@@ -431,7 +424,7 @@ fn a_parallel_scaffold_header_is_refused() {
         ScaffoldWriter::new(Vec::new(), decoder(file(false, 2)).scene().clone(), 3).unwrap();
     let (d, f) = dynamic(0);
     w.push_gop(
-        &split(&gops()[0].anchors, gops()[0].n_static),
+        &ScaffoldCanonical::split_at(gops()[0].anchors.clone(), gops()[0].n_static),
         &view_mlps(0),
         Some((&d, &f)),
     )
@@ -497,7 +490,7 @@ fn residual_gop_chunk_rules() {
     use dlgs::container::{ChunkType, Writer, FLAG_MUST_UNDERSTAND};
     let g = gops();
     let scene = decoder(file(true, 2)).scene().clone();
-    let c0 = split(&g[0].anchors, g[0].n_static);
+    let c0 = ScaffoldCanonical::split_at(g[0].anchors.clone(), g[0].n_static);
     let (d, f) = dynamic(1);
     let build = |scene: &dlgs::container::SceneHeader, gop1: &[ChunkType]| -> Vec<u8> {
         let mut w = Writer::new(Vec::new(), scene.clone()).unwrap();

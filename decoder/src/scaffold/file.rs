@@ -155,6 +155,30 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         self.last = None;
     }
 
+    /// The anchors at `t` as stand-in Gaussians (position, the larger three log-scalings, unit
+    /// rotation, zero colour and opacity): what stands for a Scaffold-GS scene where only its
+    /// extent matters (bounds, orbit cameras); the CLI and the Python reader use the same.
+    pub fn anchor_stand_ins(&mut self, t: f64) -> Result<dlgs::model::Gaussians> {
+        let tp = self.scene().locate(t)?;
+        let lang = if self.scene().lang_levels > 0 { 9 } else { 0 };
+        let gop = self.gop(tp.gop)?;
+        let (_, a) = gop.anchors_at(tp.key, tp.delta);
+        let mut g = dlgs::model::Gaussians::new(0, lang);
+        for i in 0..a.len() {
+            g.positions.push(a.positions[i]);
+            let s = a.log_scaling(i);
+            g.log_scales.push([s[3], s[4], s[5]]);
+            g.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity.push(0.0);
+            g.sh.extend_from_slice(&[0.0; 3]);
+            if lang > 0 {
+                g.lang_opacity.push(0.0);
+                g.lang.extend_from_slice(&[0.0; 9]);
+            }
+        }
+        Ok(g)
+    }
+
     /// GOP `g`'s canonical anchors (after its residual chain) without its deformation.
     pub fn canonical(&mut self, g: u32) -> Result<ScaffoldCanonical> {
         Ok(self.state(g)?.canonical.clone())
