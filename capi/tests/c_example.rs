@@ -3,7 +3,10 @@
 //! The file is built from a REAL scene with SYNTHETIC motion (no trained DLGStream model
 //! exists here): 3 GOPs, sequential binary voxel residuals, language, HEVC time features.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::{compile_example, fnv1a};
+
+use std::path::Path;
 use std::process::Command;
 
 use dlgs::container::ResidualMode;
@@ -12,48 +15,6 @@ use dlgs_encoder::EncoderConfig;
 use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 
 const SCENE: &str = "ply/gs3d-fork_lod3_tile_0_1971_sh3.ply";
-
-fn fnv1a(mut h: u64, floats: &[f32]) -> u64 {
-    for v in floats {
-        for b in v.to_le_bytes() {
-            h ^= b as u64;
-            h = h.wrapping_mul(1_099_511_628_211);
-        }
-    }
-    h
-}
-
-/// The directory that holds `libdlgs_capi.so` for this build (next to the test binary).
-fn library_dir() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let deps = exe.parent().unwrap();
-    for d in [deps, deps.parent().unwrap()] {
-        if d.join("libdlgs_capi.so").exists() {
-            return d.to_path_buf();
-        }
-    }
-    panic!("libdlgs_capi.so not found next to {}", exe.display());
-}
-
-fn compile_player(out: &Path) -> PathBuf {
-    let dir = env!("CARGO_MANIFEST_DIR");
-    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
-    let exe = out.join("player");
-    let lib = library_dir();
-    let status = Command::new(&cc)
-        .args(["-O2", "-Wall", "-Wextra", "-Werror", "-std=c11"])
-        .arg(format!("{dir}/examples/player.c"))
-        .arg(format!("-I{dir}/include"))
-        .arg(format!("-L{}", lib.display()))
-        .arg("-ldlgs_capi")
-        .arg(format!("-Wl,-rpath,{}", lib.display()))
-        .arg("-o")
-        .arg(&exe)
-        .status()
-        .unwrap_or_else(|e| panic!("running the C compiler `{cc}` (set CC): {e}"));
-    assert!(status.success(), "compiling examples/player.c failed");
-    exe
-}
 
 /// `t=... n=... fnv=...` lines of the Rust API for the same times.
 fn rust_lines(file: &Path, times: &[String]) -> Vec<String> {
@@ -107,7 +68,7 @@ fn c_player_prints_the_rust_checksums() {
     let times: Vec<String> = times.iter().map(|t| format!("{t:?}")).collect();
     let want = rust_lines(&file, &times);
 
-    let player = compile_player(tmp.path());
+    let player = compile_example("player", tmp.path());
     for memory in [false, true] {
         let mut cmd = Command::new(&player);
         cmd.arg(&file);

@@ -5,56 +5,15 @@
 //! `DLGS_STATUS_WRONG_VARIANT`. The file is the conformance vector `scaffold-tiny` (3 anchors
 //! with generated values, language, one dynamic anchor).
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::{compile_example, fnv1a};
+
+use std::path::Path;
 use std::process::Command;
 
 use dlgs_decoder::scaffold::{ScaffoldDecoder, ViewRequest};
 use dlgs_render::Camera;
 use dlgs_tests::vectors::scaffold::{valid_bytes, CAMERA, TIMES};
-
-fn fnv1a(mut h: u64, floats: &[f32]) -> u64 {
-    for v in floats {
-        for b in v.to_le_bytes() {
-            h ^= b as u64;
-            h = h.wrapping_mul(1_099_511_628_211);
-        }
-    }
-    h
-}
-
-fn library_dir() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let deps = exe.parent().unwrap();
-    for d in [deps, deps.parent().unwrap()] {
-        if d.join("libdlgs_capi.so").exists() {
-            return d.to_path_buf();
-        }
-    }
-    panic!("libdlgs_capi.so not found next to {}", exe.display());
-}
-
-fn compile(out: &Path) -> PathBuf {
-    let dir = env!("CARGO_MANIFEST_DIR");
-    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
-    let exe = out.join("scaffold_view");
-    let lib = library_dir();
-    let status = Command::new(&cc)
-        .args(["-O2", "-Wall", "-Wextra", "-Werror", "-std=c11"])
-        .arg(format!("{dir}/examples/scaffold_view.c"))
-        .arg(format!("-I{dir}/include"))
-        .arg(format!("-L{}", lib.display()))
-        .arg("-ldlgs_capi")
-        .arg(format!("-Wl,-rpath,{}", lib.display()))
-        .arg("-o")
-        .arg(&exe)
-        .status()
-        .unwrap_or_else(|e| panic!("running the C compiler `{cc}` (set CC): {e}"));
-    assert!(
-        status.success(),
-        "compiling examples/scaffold_view.c failed"
-    );
-    exe
-}
 
 /// The C program's camera: at `centre`, looking along +z, 100x100, f = 100.
 fn camera(centre: [f32; 3]) -> Camera {
@@ -129,7 +88,7 @@ fn c_decodes_scaffold_views_as_rust_does() {
     let bytes = valid_bytes();
     let file = tmp.path().join("scaffold-tiny.dlgs");
     std::fs::write(&file, &bytes).unwrap();
-    let exe = compile(tmp.path());
+    let exe = compile_example("scaffold_view", tmp.path());
 
     let lines = run(&exe, &file, CAMERA, false);
     assert!(
