@@ -9,7 +9,6 @@ use dlgs::chunks::craw::RawCodec;
 use dlgs::chunks::csog::grid_codecs as grid_coder;
 use dlgs::chunks::csog::{QuantBits, RotationCoarsening};
 use dlgs::chunks::mlpw::WeightType;
-use dlgs::container::header::ResidualMode;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs_encoder::{
@@ -299,28 +298,6 @@ pub struct CodecArgs {
     /// in docs/benchmarks/queries.md).
     #[arg(help_heading = "Language (queries)", long)]
     pub lang_decoder_f32: bool,
-}
-
-/// `intra`, `sequential` or `parallel` (format-spec §4.1).
-pub fn parse_residual_mode(s: &str) -> Result<ResidualMode> {
-    Ok(match s {
-        "intra" => ResidualMode::Intra,
-        "sequential" => ResidualMode::Sequential,
-        "parallel" => ResidualMode::Parallel,
-        _ => bail!("residual mode `{s}`: expected intra, sequential or parallel"),
-    })
-}
-
-/// `--refresh K` on a scene about to be written: only sequential scenes refresh.
-pub fn refresh_interval(k: u32, mode: ResidualMode) -> Result<u32> {
-    match (k, mode) {
-        (0, _) => Ok(0),
-        (1, _) => bail!("--refresh 1 would make every GOP intra: use --residual-mode intra"),
-        (k, ResidualMode::Sequential) => Ok(k),
-        (_, m) => bail!(
-            "--refresh applies to sequential scenes (each GOP a residual of the one before);              this one is {m:?}: give --residual-mode sequential"
-        ),
-    }
 }
 
 /// `CodecArgs` alone, to read its defaults the way clap fills them.

@@ -12,7 +12,7 @@ use crate::pending_file::PendingFile;
 use crate::scene_io::is_dlgs;
 
 pub use crate::codec_args::CodecArgs;
-use crate::codec_args::{parse_residual_mode, refresh_interval};
+use crate::residual_args::{parse_residual_mode, refresh_interval};
 
 pub(crate) fn meta(input: &Path, extra: serde_json::Value) -> serde_json::Value {
     serde_json::json!({

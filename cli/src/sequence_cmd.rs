@@ -11,7 +11,8 @@ use dlgs_render::{metrics, render, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cameras_arg::CameraArgs;
-use crate::codec_args::{parse_residual_mode, refresh_interval, CodecArgs};
+use crate::codec_args::CodecArgs;
+use crate::residual_args::{parse_residual_mode, refresh_interval};
 use crate::scene_io::Source;
 
 /// Options of per-frame sequences (several splat files, or a folder of them).
@@ -174,25 +175,22 @@ pub fn run_sequence(
         pb.set_position(t as u64 + 1);
     }
     pb.finish_and_clear();
+    let mode = match residual_mode {
+        Some(m) => parse_residual_mode(m)?,
+        None => SequenceSettings::default().residual_mode,
+    };
     let settings = SequenceSettings {
         fps_num: fps,
         fps_den: 1,
         gop_length: seq.gop_length,
         key_interval: seq.key_interval,
         min_confident: seq.min_confident,
-        residual_mode: match residual_mode {
-            Some(m) => parse_residual_mode(m)?,
-            None => SequenceSettings::default().residual_mode,
-        },
-        refresh_interval: 0,
+        residual_mode: mode,
+        refresh_interval: refresh_interval(codec.refresh, mode)?,
         residual_field: (!seq.explicit_residuals).then(|| NtcFitSettings {
             iterations: seq.field_iterations,
             ..NtcFitSettings::default()
         }),
-    };
-    let settings = SequenceSettings {
-        refresh_interval: refresh_interval(codec.refresh, settings.residual_mode)?,
-        ..settings
     };
     if seq.explicit_residuals && settings.residual_mode == ResidualMode::Intra {
         bail!("--explicit-residuals needs a residual mode: sequential or parallel, not intra");

@@ -8,9 +8,10 @@ use dlgs::container::header::DeformModel;
 use dlgs_encoder::{GopCanonical, StreamEncoder};
 use dlgs_testkit::synth::{synth_dynamic, SynthSpec};
 
-use crate::codec_args::{parse_residual_mode, refresh_interval, CodecArgs};
+use crate::codec_args::CodecArgs;
 use crate::encode_cmd::{bar, meta, report};
 use crate::pending_file::PendingFile;
+use crate::residual_args::{parse_residual_mode, refresh_interval};
 
 /// `dlgs synth`: a dynamic test model from a real scene.
 #[derive(Args, Debug, Clone)]
@@ -62,6 +63,7 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
     if a.gop_length == 0 || a.key_interval == 0 || !a.gop_length.is_multiple_of(a.key_interval) {
         bail!("--gop-length must be a positive multiple of --key-interval");
     }
+    let mode = parse_residual_mode(&a.residual_mode)?;
     let spec = SynthSpec {
         dynamic_fraction: a.dynamic_fraction,
         max_dynamic: a.max_dynamic,
@@ -78,12 +80,8 @@ pub fn run_synth(a: &SynthArgs) -> Result<()> {
             DeformModel::Reference
         },
         seed: a.seed,
-        residual_mode: parse_residual_mode(&a.residual_mode)?,
-        refresh_interval: 0,
-    };
-    let spec = SynthSpec {
-        refresh_interval: refresh_interval(a.codec.refresh, spec.residual_mode)?,
-        ..spec
+        residual_mode: mode,
+        refresh_interval: refresh_interval(a.codec.refresh, mode)?,
     };
     let model = synth_dynamic(&g, &spec)?;
     let settings =
