@@ -135,6 +135,12 @@ int main(int argc, char **argv) {
                 (z.tv_sec - a.tv_sec) * 1e3 + (z.tv_nsec - a.tv_nsec) / 1e6);
     }
 
+    /* Played in time order, the next GOP was decoded ahead on a background thread. */
+    uint64_t hits = 0;
+    if (!check(dlgs_read_ahead_hits(dec, &hits), "dlgs_read_ahead_hits")) {
+        printf("GOPs ready from read-ahead: %llu\n", (unsigned long long)hits);
+    }
+
     /* Errors are reported, not crashes: a time past the end. */
     uint32_t w;
     DlgsStatus s = dlgs_decode_frame(dec, info.duration + 1.0, eye, &b, &w);

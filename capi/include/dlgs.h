@@ -189,6 +189,24 @@ const char *dlgs_version(void);
 // the decoder is open.
 enum DlgsStatus dlgs_set_hevc_decoder(struct DlgsDecoder *d, DlgsHevcDecodeFn decode, void *user);
 
+// Turn read-ahead on (`enabled` non-zero, the default) or off. With it on, once two frames
+// of a GOP have been asked for in time order, the next GOP is decoded on a background thread
+// (one GOP of extra memory), so playback does not stall at GOP boundaries; frames are the
+// same bits either way. Scaffold-GS files (variant 1) decode without read-ahead: the call
+// succeeds and changes nothing.
+//
+// # Safety
+// `d` is NULL or an open decoder not used by another thread during the call.
+enum DlgsStatus dlgs_set_read_ahead(struct DlgsDecoder *d, int32_t enabled);
+
+// `*hits` receives how many GOPs were taken ready from the read-ahead thread since the
+// decoder was opened or `dlgs_set_read_ahead` was last called (0 for Scaffold-GS files).
+//
+// # Safety
+// `d` is NULL or an open decoder not used by another thread during the call; `hits` is
+// NULL or writable storage for one uint64_t.
+enum DlgsStatus dlgs_read_ahead_hits(struct DlgsDecoder *d, uint64_t *hits);
+
 // Decode the Gaussians `view` sees at time `t` seconds into `buffers` (layout and
 // conventions of `dlgs_decode_frame`). For a Scaffold-GS file the neural Gaussians are given
 // as 3D Gaussians: log scales, opacities as logits, colour as SH degree 0 (DC); opacities

@@ -20,8 +20,10 @@ use dlgs_decoder::scaffold::ScaffoldDecoder;
 use dlgs_decoder::{Decoder, FrameOptions};
 
 mod hevc;
+mod read_ahead;
 mod view;
 pub use hevc::{dlgs_set_hevc_decoder, DlgsHevcDecodeFn};
+pub use read_ahead::{dlgs_read_ahead_hits, dlgs_set_read_ahead};
 pub use view::{dlgs_decode_frame_view, DlgsView};
 
 /// Result of every call.

@@ -6,13 +6,12 @@
 use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::PathBuf;
-use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use dlgs::model::Gaussians;
-use dlgs_decoder::stream::StreamDecoder;
+use dlgs_decoder::pipeline::{PipelineOptions, PlaybackStream, ReadyGop};
 use dlgs_decoder::{DecodedGop, FrameOptions};
 
 #[derive(clap::Args)]
@@ -70,10 +69,6 @@ impl<R: Read> Read for Throttled<R> {
     }
 }
 
-/// What the reader thread sends: a decoded GOP, the time from asking for it to having it
-/// (bytes arriving + decoding) and the decoding time alone, in ms.
-type GopMsg = dlgs::Result<(Arc<DecodedGop>, f64, f64)>;
-
 fn open_source(args: &PlayArgs) -> Result<Box<dyn Read + Send>> {
     let raw: Box<dyn Read + Send> = if args.file.as_os_str() == "-" {
         Box::new(std::io::stdin())
@@ -109,9 +104,17 @@ pub(crate) struct PlayReport {
     pub gop_decode_ms: Vec<f64>,
     /// Bytes arriving + decoding, per GOP.
     pub gop_ready_ms: Vec<f64>,
+    /// Where each GOP's decode went: canonical state, time features and decoders (these two
+    /// overlap for GOP 0), key preparation (GOP 0: its first key interval only).
+    pub gop_state_ms: Vec<f64>,
+    pub gop_features_ms: Vec<f64>,
+    pub gop_keys_ms: Vec<f64>,
     /// Time the player waited for a GOP that had not arrived yet.
     pub stall_ms: f64,
     pub sustained_decode_fps: f64,
+    /// Frames shown per second of wall time after the first frame (`--max-speed`: the rate
+    /// the player keeps up with GOP decodes overlapping frames).
+    pub wall_fps: f64,
     /// Scaffold-GS files: Gaussians generated per frame (mean), for the cameras played.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gaussians_mean: Option<f64>,
@@ -124,70 +127,17 @@ pub fn run_play(args: &PlayArgs) -> Result<()> {
     }
     let opened = Instant::now();
     let src = open_source(args)?;
-    let (tx, rx) = sync_channel::<GopMsg>(1);
-    let (scene_tx, scene_rx) = sync_channel(1);
-    let background_threads = args.gop_threads.max(1);
-    let reader = std::thread::spawn(move || {
-        let mut dec = match StreamDecoder::new(src) {
-            Ok(d) => d,
-            Err(e) => {
-                let _ = scene_tx.send(Err(e));
-                return;
-            }
-        };
-        // GOP 0 decodes on every core (nothing plays yet: the first frame waits for it); later
-        // GOPs decode ahead on one thread of their own, so that the frames being shown keep
-        // the other core and never queue behind a GOP's work in a shared pool.
-        let ahead = rayon::ThreadPoolBuilder::new()
-            .num_threads(background_threads)
-            .thread_name(|i| format!("dlgs-gop-ahead-{i}"))
-            .build();
-        let ahead = match ahead {
-            Ok(p) => p,
-            Err(e) => {
-                let _ = scene_tx.send(Err(dlgs::Error::input(format!(
-                    "starting the GOP decode thread: {e}"
-                ))));
-                return;
-            }
-        };
-        let _ = scene_tx.send(Ok(dec.scene().clone()));
-        let mut first = true;
-        loop {
-            let t0 = Instant::now();
-            let next = if first {
-                dec.next_gop()
-            } else {
-                ahead.install(|| dec.next_gop())
-            };
-            first = false;
-            match next {
-                Ok(Some(g)) => {
-                    let total = t0.elapsed().as_secs_f64() * 1e3;
-                    let decode = dec.last_decode_time().as_secs_f64() * 1e3;
-                    if tx.send(Ok((g, total, decode))).is_err() {
-                        return;
-                    }
-                }
-                Ok(None) => return,
-                Err(e) => {
-                    let _ = tx.send(Err(e));
-                    return;
-                }
-            }
-        }
-    });
-    let scene = scene_rx
-        .recv()
-        .context("the reader thread ended before the header")?
-        .context("reading the stream header")?;
+    let opts = PipelineOptions {
+        gop_threads: args.gop_threads.max(1),
+        ..Default::default()
+    };
+    let mut stream = PlaybackStream::spawn(src, opts).context("reading the stream header")?;
+    let scene = stream.scene().clone();
     let fps = args.fps.unwrap_or(scene.fps());
     if !(fps > 0.0 && fps.is_finite()) {
         bail!("--fps must be a positive number, got {fps}");
     }
-    let report = play_loop(args, &scene, fps, &rx, opened)?;
-    drop(rx);
-    let _ = reader.join();
+    let report = play_loop(args, &scene, fps, &mut stream, opened)?;
     print_report(&report, args.json)
 }
 
@@ -195,7 +145,7 @@ fn play_loop(
     args: &PlayArgs,
     scene: &dlgs::container::SceneHeader,
     fps: f64,
-    rx: &Receiver<GopMsg>,
+    stream: &mut PlaybackStream,
     opened: Instant,
 ) -> Result<PlayReport> {
     let frames = scene.frame_count;
@@ -232,14 +182,13 @@ fn play_loop(
         if gop.as_ref().map(|g| g.index) != Some(time.gop) {
             let wait = Instant::now();
             loop {
-                let (g, arrival_ms, ms) = rx
-                    .recv()
-                    .context("the stream ended before the GOP of frame")?
-                    .with_context(|| format!("decoding the GOP of frame {f}"))?;
-                r.gop_decode_ms.push(ms);
-                r.gop_ready_ms.push(arrival_ms);
-                let done = g.index >= time.gop;
-                gop = Some(g);
+                let ready = stream
+                    .next_gop()
+                    .with_context(|| format!("decoding the GOP of frame {f}"))?
+                    .with_context(|| format!("the stream ended before the GOP of frame {f}"))?;
+                r.record_gop(&ready);
+                let done = ready.gop.index >= time.gop;
+                gop = Some(ready.gop);
                 if done {
                     break;
                 }
@@ -274,10 +223,22 @@ fn play_loop(
 }
 
 impl PlayReport {
+    fn record_gop(&mut self, ready: &ReadyGop) {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        self.gop_decode_ms.push(ms(ready.times.total));
+        self.gop_ready_ms.push(ms(ready.ready));
+        self.gop_state_ms.push(ms(ready.times.state));
+        self.gop_features_ms.push(ms(ready.times.dynamic));
+        self.gop_keys_ms.push(ms(ready.times.keys));
+    }
+
     /// Frame decode statistics from the per-frame times.
     pub(crate) fn summarise(&mut self, mut decode_ms: Vec<f64>) {
         if decode_ms.is_empty() {
             return;
+        }
+        if self.wall_s > 0.0 {
+            self.wall_fps = f64::from(self.shown) / self.wall_s;
         }
         let n = decode_ms.len() as f64;
         let frames_ms = decode_ms.iter().sum::<f64>();
@@ -321,14 +282,20 @@ pub(crate) fn print_report(r: &PlayReport, json: bool) -> Result<()> {
             list(&r.gop_decode_ms),
             list(&r.gop_ready_ms)
         );
+        println!(
+            "  of which canonical state: {} ms; time features + decoders: {} ms; keys: {} ms",
+            list(&r.gop_state_ms),
+            list(&r.gop_features_ms),
+            list(&r.gop_keys_ms)
+        );
     }
     println!("player stalled {:.1} ms waiting for GOPs", r.stall_ms);
     if let Some(n) = r.gaussians_mean {
         println!("Scaffold-GS: {n:.0} neural Gaussians per frame (mean)");
     }
     println!(
-        "sustained decode rate (frames + GOPs on one thread): {:.1} frames/s",
-        r.sustained_decode_fps
+        "sustained decode rate (frames + GOPs on one thread): {:.1} frames/s; shown per wall second: {:.1}",
+        r.sustained_decode_fps, r.wall_fps
     );
     Ok(())
 }

@@ -244,20 +244,3 @@ pub(crate) fn assemble(
         ntc: state.ntc,
     }
 }
-
-/// GOP `g` from its decoded canonical `state` and its time features and decoders.
-pub(crate) fn gop(
-    scene: &SceneHeader,
-    limits: &Limits,
-    hevc: Option<&SharedKeyPictureDecoder>,
-    g: u32,
-    chunks: &[ChunkInfo],
-    gop_at: u64,
-    state: State,
-    payload: impl FnMut(&ChunkInfo) -> Result<Vec<u8>>,
-) -> Result<DecodedGop> {
-    let dynamic = dynamic_payloads(scene, chunks, gop_at, payload)?
-        .map(|p| decode_dynamic(scene, limits, hevc, &p))
-        .transpose()?;
-    Ok(assemble(scene, g, state, dynamic))
-}

@@ -155,15 +155,24 @@ impl Deformer {
     /// Compute every key's geometry now (players that will show the whole GOP; a seek leaves
     /// the keys it does not need for later).
     pub fn prepare_all_keys(&self, canon: &Gaussians) -> Result<()> {
-        self.features.ensure_keys(0..self.features.keys)?;
-        let Some(geo) = &self.geometry else {
+        self.prepare_keys(canon, 0..self.features.keys)
+    }
+
+    /// Decode the time-feature keys of `keys` and compute their geometry now, with the slerp
+    /// angles between neighbours inside the range (`0..2` is what the frames of the first key
+    /// interval need). Keys already prepared are not redone; the values are the same whether
+    /// a key is prepared here, by another thread, or by the first frame that needs it.
+    pub fn prepare_keys(&self, canon: &Gaussians, keys: Range<usize>) -> Result<()> {
+        let keys = keys.start.min(self.features.keys)..keys.end.min(self.features.keys);
+        self.features.ensure_keys(keys.clone())?;
+        if self.geometry.is_none() {
             return Ok(());
-        };
-        for k in 0..geo.angles.len() {
-            self.angles(canon, k);
         }
-        if geo.angles.is_empty() && !geo.keys.is_empty() {
-            self.key(canon, 0);
+        if keys.len() == 1 {
+            self.key(canon, keys.start);
+        }
+        for k in keys.start..keys.end.saturating_sub(1) {
+            self.angles(canon, k);
         }
         Ok(())
     }

@@ -9,7 +9,9 @@ pub mod hevc;
 pub mod interp;
 mod lru;
 pub mod panel;
+pub mod pipeline;
 pub mod planar;
+mod read_ahead;
 pub mod scaffold;
 pub mod stream;
 
@@ -29,6 +31,7 @@ use dlgs::{Canonical, Error, FormatErrorKind, Limits, Result};
 pub use deform::{Deformer, FrameOptions, FrameSlices};
 pub use hevc::{KeyPictureDecoder, SharedKeyPictureDecoder};
 use lru::GopLru;
+use read_ahead::ReadAhead;
 
 /// One decoded GOP: canonical Gaussians and, if the scene has dynamics, its deformation field.
 pub struct DecodedGop {
@@ -72,6 +75,15 @@ impl DecodedGop {
         })
     }
 
+    /// Prepare the time-feature keys of `keys` (decoded, and their geometry computed) before
+    /// the frames that need them: see [`Deformer::prepare_keys`]. Nothing for a static scene.
+    pub fn prepare_keys(&self, keys: std::ops::Range<usize>) -> Result<()> {
+        match &self.deformer {
+            Some(d) => d.prepare_keys(&self.canonical.dynamics, keys),
+            None => Ok(()),
+        }
+    }
+
     /// The GOP's time features and decoders, if the scene has dynamic Gaussians (rebuilt from
     /// the deformer's layout; for re-encoding and inspection, not per frame).
     pub fn dynamic(&self) -> Result<Option<DynamicGop>> {
@@ -113,6 +125,8 @@ pub struct Decoder<R: Read + Seek> {
     states: GopLru<State>,
     /// Decodes HEVC time features; `None` without the `hevc` feature until a player sets one.
     hevc: Option<SharedKeyPictureDecoder>,
+    /// The next GOP, decoded ahead while frames are asked for in time order.
+    ahead: ReadAhead,
 }
 
 impl Decoder<BufReader<File>> {
@@ -137,6 +151,7 @@ impl<R: Read + Seek> Decoder<R> {
             gops: GopLru::new(1, None),
             states: GopLru::new(4, Some(0)),
             hevc: hevc::default_decoder(),
+            ahead: ReadAhead::new(true),
         })
     }
 
@@ -146,6 +161,7 @@ impl<R: Read + Seek> Decoder<R> {
     pub fn set_key_picture_decoder(&mut self, decoder: SharedKeyPictureDecoder) {
         self.hevc = Some(decoder);
         self.gops.clear();
+        self.set_read_ahead(self.read_ahead());
     }
 
     pub fn scene(&self) -> &SceneHeader {
@@ -187,6 +203,9 @@ impl<R: Read + Seek> Decoder<R> {
     fn gop_for_keys(&mut self, g: u32, keys: std::ops::Range<usize>) -> Result<Arc<DecodedGop>> {
         if let Some(c) = self.gops.get(g) {
             return Ok(c);
+        }
+        if let Some(decoded) = self.take_ahead(g) {
+            return decoded;
         }
         let chunks = self.reader.gop_chunks(g)?;
         let gop_at = self.reader.gop_entry(g)?.offset;
@@ -315,6 +334,7 @@ impl<R: Read + Seek> Decoder<R> {
     ) -> Result<Frame> {
         let time = self.scene().locate(t)?;
         let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        self.frame_requested(time.gop, t);
         DecodedGop::frame(&gop, time, opts, reuse)
     }
 
@@ -324,6 +344,7 @@ impl<R: Read + Seek> Decoder<R> {
     pub fn frame_at_merged(&mut self, t: f64, opts: &FrameOptions) -> Result<Gaussians> {
         let time = self.scene().locate(t)?;
         let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        self.frame_requested(time.gop, t);
         let (statics, canon) = (&gop.canonical.statics, &gop.canonical.dynamics);
         let same_layout =
             statics.sh_degree == canon.sh_degree && statics.lang_width == canon.lang_width;
@@ -351,6 +372,7 @@ impl<R: Read + Seek> Decoder<R> {
     ) -> Result<()> {
         let time = self.scene().locate(t)?;
         let gop = self.gop_for_keys(time.gop, time.key..time.key + 2)?;
+        self.frame_requested(time.gop, t);
         let (statics, canon) = (&gop.canonical.statics, &gop.canonical.dynamics);
         let fits = |g: &Gaussians, extra: &Gaussians| {
             let rows = g.len() + extra.len();

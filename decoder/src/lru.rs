@@ -40,6 +40,11 @@ impl<T: Clone> GopLru<T> {
         })
     }
 
+    /// Whether `g` is held (not counted as a use).
+    pub(crate) fn contains(&self, g: u32) -> bool {
+        self.entries.iter().any(|e| e.0 == g)
+    }
+
     pub(crate) fn insert(&mut self, g: u32, v: T) {
         if self.capacity == 0 || self.entries.iter().any(|e| e.0 == g) {
             return;

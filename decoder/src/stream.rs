@@ -16,6 +16,34 @@ use dlgs::{Error, FormatErrorKind, Limits, Result};
 use crate::hevc::SharedKeyPictureDecoder;
 use crate::{build, DecodedGop, State};
 
+/// Which time-feature keys [`StreamDecoder::next_gop`] prepares (decoded, geometry computed)
+/// before it returns a GOP.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum KeyPreparation {
+    /// Every key: a stream is played through, so the key work is done while the GOP is
+    /// decoded ahead rather than on the first frame of each key interval (the default).
+    #[default]
+    All,
+    /// Only the first key interval (keys 0 and 1): the GOP is returned sooner and its first
+    /// frames can be shown; the caller prepares the rest with [`DecodedGop::prepare_keys`]
+    /// (or each frame computes the keys it needs). Players use it for the first GOP.
+    FirstInterval,
+}
+
+/// Where the time of the last [`StreamDecoder::next_gop`] went (not counting the wait for its
+/// bytes). `state` and `dynamic` overlap when the calling pool has more than one thread.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GopTimes {
+    /// Canonical chunk decoded, or residual applied to the reference state.
+    pub state: Duration,
+    /// Time features (HEVC included) and decoders.
+    pub dynamic: Duration,
+    /// Key preparation ([`KeyPreparation`]).
+    pub keys: Duration,
+    /// The whole decode.
+    pub total: Duration,
+}
+
 /// Decodes GOPs in file order from a `Read`.
 pub struct StreamDecoder<R: Read> {
     stream: StreamReader<R>,
@@ -28,8 +56,9 @@ pub struct StreamDecoder<R: Read> {
     first: Option<State>,
     last: Option<(u32, State)>,
     ended: bool,
-    /// Time spent decoding the last GOP (not waiting for its bytes).
-    last_decode: Duration,
+    /// Where the time of the last GOP's decode went (not waiting for its bytes).
+    last_times: GopTimes,
+    key_preparation: KeyPreparation,
     /// Decodes HEVC time features (see [`crate::hevc`]).
     hevc: Option<SharedKeyPictureDecoder>,
 }
@@ -50,7 +79,8 @@ impl<R: Read> StreamDecoder<R> {
             first: None,
             last: None,
             ended: false,
-            last_decode: Duration::ZERO,
+            last_times: GopTimes::default(),
+            key_preparation: KeyPreparation::All,
             hevc: crate::hevc::default_decoder(),
         };
         d.read_until_next_gop(false)?;
@@ -65,6 +95,11 @@ impl<R: Read> StreamDecoder<R> {
     /// [`crate::Decoder::set_key_picture_decoder`]).
     pub fn set_key_picture_decoder(&mut self, decoder: SharedKeyPictureDecoder) {
         self.hevc = Some(decoder);
+    }
+
+    /// Which keys [`Self::next_gop`] prepares before returning a GOP (default: all).
+    pub fn set_key_preparation(&mut self, keys: KeyPreparation) {
+        self.key_preparation = keys;
     }
 
     /// Bytes read from the source so far.
@@ -94,7 +129,7 @@ impl<R: Read> StreamDecoder<R> {
         self.read_until_next_gop(true)?;
         let t0 = Instant::now();
         let gop = self.decode_collected(g, &header, gop_at)?;
-        self.last_decode = t0.elapsed();
+        self.last_times.total = t0.elapsed();
         Ok(Some(gop))
     }
 
@@ -129,7 +164,12 @@ impl<R: Read> StreamDecoder<R> {
 
     /// How long decoding the last GOP took, without the time its bytes took to arrive.
     pub fn last_decode_time(&self) -> Duration {
-        self.last_decode
+        self.last_times.total
+    }
+
+    /// Where the time of the last GOP's decode went.
+    pub fn last_gop_times(&self) -> GopTimes {
+        self.last_times
     }
 
     fn decode_collected(
@@ -167,27 +207,57 @@ impl<R: Read> StreamDecoder<R> {
         };
         // One budget for everything this GOP's chunks allocate.
         let limits = self.limits.fresh();
-        let state = build::state(&scene, &limits, &infos, gop_at, base, &mut payload)?;
+        let hevc = self.hevc.clone();
+        let dynamic_payloads = build::dynamic_payloads(&scene, &infos, gop_at, &mut payload)?;
+        let decode_dynamic = || {
+            let t0 = Instant::now();
+            let d = dynamic_payloads
+                .as_ref()
+                .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), p))
+                .transpose();
+            (d, t0.elapsed())
+        };
+        let decode_state = |payload| {
+            let t0 = Instant::now();
+            let s = build::state(&scene, &limits, &infos, gop_at, base, payload);
+            (s, t0.elapsed())
+        };
+        // The time features (HEVC) need nothing of the canonical state: with a second thread
+        // to spare they decode beside it (as the random-access decoder does); on a one-thread
+        // pool (a player's GOP-ahead thread) they run in turn, leaving the other core to the
+        // frames. Errors are reported state first either way; no value depends on the order.
+        let ((state, state_time), (dynamic, dynamic_time)) = if rayon::current_num_threads() > 1 {
+            std::thread::scope(|s| {
+                let worker = s.spawn(decode_dynamic);
+                let state = decode_state(&mut payload);
+                let dynamic = worker
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                (state, dynamic)
+            })
+        } else {
+            let state = decode_state(&mut payload);
+            (state, decode_dynamic())
+        };
+        let state = state?;
+        let dynamic = dynamic?;
         if g == 0 {
             self.first = Some(state.clone());
         }
         self.last = Some((g, state.clone()));
-        let hevc = self.hevc.as_ref();
-        let gop = build::gop(
-            &scene,
-            &limits,
-            hevc,
-            g,
-            &infos,
-            gop_at,
-            state,
-            &mut payload,
-        )?;
-        // A stream is played through: do all key geometry now, while the GOP is decoded,
-        // rather than on the first frame of each key interval.
-        if let Some(d) = &gop.deformer {
-            d.prepare_all_keys(&gop.canonical.dynamics)?;
-        }
+        let gop = build::assemble(&scene, g, state, dynamic);
+        let t0 = Instant::now();
+        let keys = match self.key_preparation {
+            KeyPreparation::All => 0..usize::MAX,
+            KeyPreparation::FirstInterval => 0..2,
+        };
+        gop.prepare_keys(keys)?;
+        self.last_times = GopTimes {
+            state: state_time,
+            dynamic: dynamic_time,
+            keys: t0.elapsed(),
+            total: Duration::ZERO,
+        };
         Ok(Arc::new(gop))
     }
 

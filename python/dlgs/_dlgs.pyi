@@ -111,9 +111,11 @@ class Writer:
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool: ...
 
 def open(source: Union[PathLike, bytes, bytearray, memoryview],
-         threads: Optional[int] = None) -> Reader:
+         threads: Optional[int] = None, read_ahead: bool = True) -> Reader:
     """Open a .dlgs file (path) or stream held in memory (bytes-like). threads: this reader's
-    own worker threads (default: the process-wide pool, one per core)."""
+    own worker threads (default: the process-wide pool, one per core). read_ahead: while
+    frames are asked for in time order, decode the next GOP on a background thread (3DGS
+    files; the frames are the same bits either way)."""
 def read_scene(path: PathLike) -> Frame:
     """Read a PLY, .splat, SPZ or SOG (.sog / meta.json) scene."""
 def write_scene(path: PathLike, scene: Frame, spz_version: int = 3,

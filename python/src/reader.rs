@@ -56,11 +56,12 @@ pub(crate) const SCAFFOLD_ONLY_FRAMES: &str = "a Scaffold-GS file (variant 1) ha
 
 /// Open a path (str or os.PathLike) or bytes-like object.
 #[pyfunction]
-#[pyo3(name = "open", signature = (source, threads=None))]
+#[pyo3(name = "open", signature = (source, threads=None, read_ahead=true))]
 pub fn open_reader(
     py: Python<'_>,
     source: &Bound<'_, PyAny>,
     threads: Option<usize>,
+    read_ahead: bool,
 ) -> Res<Reader> {
     let src: Box<dyn Source> = if let Ok(b) = source.downcast::<PyBytes>() {
         Box::new(Cursor::new(b.as_bytes().to_vec()))
@@ -89,6 +90,7 @@ pub fn open_reader(
                 Ok((None, Some(Mutex::new(d)), scene, version))
             } else {
                 let mut d = Decoder::new(src, limits)?;
+                d.set_read_ahead(read_ahead);
                 let scene = d.scene().clone();
                 let version = d.reader().version();
                 Ok((Some(Mutex::new(d)), None, scene, version))

@@ -94,7 +94,7 @@ impl Scene {
     fn open(py: Python<'_>, p: &Path) -> Res<Scene> {
         if is_dlgs(p) {
             let path = p.to_path_buf().into_pyobject(py)?;
-            Ok(Scene::Dlgs(Box::new(open_reader(py, &path, None)?)))
+            Ok(Scene::Dlgs(Box::new(open_reader(py, &path, None, true)?)))
         } else {
             let p = p.to_path_buf();
             let g = py

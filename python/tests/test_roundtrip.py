@@ -217,3 +217,14 @@ def test_sog_written_and_read_back(work):
     assert np.all(np.abs(np.sum(rot * back["rotations"], axis=1)) > 0.995)
     sig = lambda x: 1 / (1 + np.exp(-x.astype(np.float64)))  # noqa: E731
     assert np.all(np.abs(sig(scene["opacities"]) - sig(back["opacities"])) <= 0.5 / 255 + 1e-6)
+
+
+def test_read_ahead_changes_no_bit(dyn_exact):
+    """Frames asked for in time order (the next GOP decoded on a background thread) equal the
+    frames of a reader that decodes each GOP in turn."""
+    ahead, plain = dlgs.open(dyn_exact), dlgs.open(dyn_exact, read_ahead=False)
+    info = ahead.info
+    times = [f / info["fps"] for f in range(0, info["frame_count"], 3)]
+    assert len({int(t * info["fps"]) // info["gop_length"] for t in times}) >= 2
+    for t in times:
+        assert_same(ahead.frame(t, language=True), plain.frame(t, language=True))
