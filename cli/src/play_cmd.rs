@@ -131,7 +131,7 @@ pub fn run_play(args: &PlayArgs) -> Result<()> {
         gop_threads: args.gop_threads.max(1),
         ..Default::default()
     };
-    let mut stream = PlaybackStream::spawn(src, opts).context("reading the stream header")?;
+    let mut stream = PlaybackStream::open(src, opts).context("reading the stream header")?;
     let scene = stream.scene().clone();
     let fps = args.fps.unwrap_or(scene.fps());
     if !(fps > 0.0 && fps.is_finite()) {

@@ -16,24 +16,60 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use dlgs::container::SceneHeader;
-use dlgs::{Error, Limits, Result};
+use dlgs::{Error, Result};
 
-use crate::hevc::SharedKeyPictureDecoder;
 use crate::stream::{GopTimes, KeyPreparation, StreamDecoder};
 use crate::DecodedGop;
 
+/// A decoder of GOPs in file order that [`PlaybackStream`] drives on its reader thread: the
+/// 3DGS [`StreamDecoder`] and the Scaffold-GS stream decoder.
+pub trait GopSource: Send + 'static {
+    type Gop: Send + Sync + 'static;
+    fn scene(&self) -> &SceneHeader;
+    /// The next GOP, decoded; `None` after the last.
+    fn next_gop(&mut self) -> Result<Option<Arc<Self::Gop>>>;
+    /// Where the last GOP's decode time went (`total` at least).
+    fn last_gop_times(&self) -> GopTimes;
+    /// Whether the next GOP should be returned as soon as its first frames can be shown
+    /// (what is left then done by [`Self::finish_gop`]). Default: nothing to hurry.
+    fn hurry(&mut self, _first_frames_only: bool) {}
+    /// Finish what a hurried GOP left undone (default: nothing).
+    fn finish_gop(_gop: &Self::Gop) {}
+}
+
+impl<R: Read + Send + 'static> GopSource for StreamDecoder<R> {
+    type Gop = DecodedGop;
+    fn scene(&self) -> &SceneHeader {
+        StreamDecoder::scene(self)
+    }
+    fn next_gop(&mut self) -> Result<Option<Arc<DecodedGop>>> {
+        StreamDecoder::next_gop(self)
+    }
+    fn last_gop_times(&self) -> GopTimes {
+        StreamDecoder::last_gop_times(self)
+    }
+    /// Hurried: only the first key interval's keys (see [`KeyPreparation`]).
+    fn hurry(&mut self, first_frames_only: bool) {
+        self.set_key_preparation(if first_frames_only {
+            KeyPreparation::FirstInterval
+        } else {
+            KeyPreparation::All
+        });
+    }
+    fn finish_gop(gop: &DecodedGop) {
+        // A key that fails here fails again, with its error, in the frame that needs it.
+        let _ = gop.prepare_keys(0..usize::MAX);
+    }
+}
+
 /// How a [`PlaybackStream`] decodes ahead.
-#[derive(Clone)]
+#[derive(Clone, Copy, Debug)]
 pub struct PipelineOptions {
     /// Threads that decode the GOPs after the first (the first uses every core). 1 keeps a
     /// core for the frames on a 2-core machine.
     pub gop_threads: usize,
     /// Decoded GOPs that may wait for the player (at least 1): the memory budget.
     pub gops_ahead: usize,
-    pub limits: Limits,
-    /// HEVC time features are decoded with this (default: the built-in FFmpeg decoder, if
-    /// the library was built with it).
-    pub hevc: Option<SharedKeyPictureDecoder>,
 }
 
 impl Default for PipelineOptions {
@@ -41,15 +77,13 @@ impl Default for PipelineOptions {
         PipelineOptions {
             gop_threads: 1,
             gops_ahead: 1,
-            limits: Limits::default(),
-            hevc: None,
         }
     }
 }
 
 /// A GOP the reader thread has decoded.
-pub struct ReadyGop {
-    pub gop: Arc<DecodedGop>,
+pub struct ReadyGop<G = DecodedGop> {
+    pub gop: Arc<G>,
     /// From the reader asking for the GOP to having it decoded: its bytes arriving plus its
     /// decode.
     pub ready: Duration,
@@ -57,41 +91,40 @@ pub struct ReadyGop {
     pub times: GopTimes,
 }
 
-type Msg = Result<ReadyGop>;
-
 /// A stream decoded ahead of playback on a thread of its own (see the module docs).
-pub struct PlaybackStream {
+pub struct PlaybackStream<G: Send + Sync + 'static = DecodedGop> {
     scene: SceneHeader,
-    rx: Option<Receiver<Msg>>,
+    rx: Option<Receiver<Result<ReadyGop<G>>>>,
     reader: Option<JoinHandle<()>>,
 }
 
-impl PlaybackStream {
-    /// Start reading `src` and return once its header has been read.
-    pub fn spawn<R: Read + Send + 'static>(src: R, opts: PipelineOptions) -> Result<Self> {
-        let (tx, rx) = sync_channel::<Msg>(opts.gops_ahead.max(1) - 1);
-        let (scene_tx, scene_rx) = sync_channel(1);
+impl PlaybackStream<DecodedGop> {
+    /// Read a 3DGS stream's header from `src` and start decoding its GOPs ahead (the default
+    /// limits and HEVC decoder; [`Self::spawn`] takes a decoder set up otherwise).
+    pub fn open<R: Read + Send + 'static>(src: R, opts: PipelineOptions) -> Result<Self> {
+        Self::spawn(StreamDecoder::new(src)?, opts)
+    }
+}
+
+impl<G: Send + Sync + 'static> PlaybackStream<G> {
+    /// Start decoding the GOPs of `source` (its header already read) on a reader thread.
+    pub fn spawn<S: GopSource<Gop = G>>(source: S, opts: PipelineOptions) -> Result<Self> {
+        let scene = source.scene().clone();
+        let (tx, rx) = sync_channel(opts.gops_ahead.max(1) - 1);
+        let ahead = rayon::ThreadPoolBuilder::new()
+            .num_threads(opts.gop_threads.max(1))
+            .thread_name(|i| format!("dlgs-gop-ahead-{i}"))
+            .build()
+            .map_err(|e| Error::input(format!("starting the GOP decode threads: {e}")))?;
         let reader = std::thread::Builder::new()
             .name("dlgs-stream-reader".into())
-            .spawn(move || read_ahead(src, opts, scene_tx, tx))
+            .spawn(move || read_ahead(source, ahead, tx))
             .map_err(|e| Error::input(format!("starting the stream reader thread: {e}")))?;
-        let scene = match scene_rx.recv() {
-            Ok(r) => r,
-            Err(_) => Err(Error::input(
-                "the stream reader thread ended before the header",
-            )),
-        };
-        match scene {
-            Ok(scene) => Ok(PlaybackStream {
-                scene,
-                rx: Some(rx),
-                reader: Some(reader),
-            }),
-            Err(e) => {
-                let _ = reader.join();
-                Err(e)
-            }
-        }
+        Ok(PlaybackStream {
+            scene,
+            rx: Some(rx),
+            reader: Some(reader),
+        })
     }
 
     pub fn scene(&self) -> &SceneHeader {
@@ -100,7 +133,7 @@ impl PlaybackStream {
 
     /// The next GOP in file order, waiting for the reader if it is not decoded yet; `None`
     /// after the last (the index and tail have then been read and checked).
-    pub fn next_gop(&mut self) -> Result<Option<ReadyGop>> {
+    pub fn next_gop(&mut self) -> Result<Option<ReadyGop<G>>> {
         let Some(rx) = &self.rx else {
             return Ok(None);
         };
@@ -119,7 +152,7 @@ impl PlaybackStream {
     }
 }
 
-impl Drop for PlaybackStream {
+impl<G: Send + Sync + 'static> Drop for PlaybackStream<G> {
     fn drop(&mut self) {
         // The reader stops at its next send; it finishes the GOP it is decoding first.
         self.rx = None;
@@ -129,69 +162,41 @@ impl Drop for PlaybackStream {
     }
 }
 
-/// The reader thread: header, then every GOP, each sent as soon as it is decoded.
-fn read_ahead<R: Read + Send>(
-    src: R,
-    opts: PipelineOptions,
-    scene_tx: SyncSender<Result<SceneHeader>>,
-    tx: SyncSender<Msg>,
+/// The reader thread: every GOP, each sent as soon as it is decoded.
+fn read_ahead<S: GopSource>(
+    mut source: S,
+    ahead: rayon::ThreadPool,
+    tx: SyncSender<Result<ReadyGop<S::Gop>>>,
 ) {
-    let mut dec = match StreamDecoder::with_limits(src, opts.limits.clone()) {
-        Ok(d) => d,
-        Err(e) => {
-            let _ = scene_tx.send(Err(e));
-            return;
-        }
-    };
-    if let Some(h) = opts.hevc {
-        dec.set_key_picture_decoder(h);
-    }
-    let ahead = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.gop_threads.max(1))
-        .thread_name(|i| format!("dlgs-gop-ahead-{i}"))
-        .build();
-    let ahead = match ahead {
-        Ok(p) => p,
-        Err(e) => {
-            let _ = scene_tx.send(Err(Error::input(format!(
-                "starting the GOP decode threads: {e}"
-            ))));
-            return;
-        }
-    };
-    let _ = scene_tx.send(Ok(dec.scene().clone()));
-    // GOP 0 on every core, returned with its first key interval only.
-    dec.set_key_preparation(KeyPreparation::FirstInterval);
-    let Some(first) = decode_next(&mut dec, &tx, None) else {
+    // GOP 0 on every core, returned as soon as its first frames can be shown.
+    source.hurry(true);
+    let Some(first) = decode_next(&mut source, &tx, None) else {
         return;
     };
-    // Its other keys on the GOP-ahead pool while its first frames play. A key that fails
-    // here fails again, with its error, in the frame that needs it.
-    ahead.install(|| {
-        let _ = first.prepare_keys(0..usize::MAX);
-    });
-    dec.set_key_preparation(KeyPreparation::All);
-    while decode_next(&mut dec, &tx, Some(&ahead)).is_some() {}
+    // The rest of it on the GOP-ahead pool while its first frames play.
+    ahead.install(|| S::finish_gop(&first));
+    source.hurry(false);
+    while decode_next(&mut source, &tx, Some(&ahead)).is_some() {}
 }
 
 /// Decode and send the next GOP (on `pool`, or the caller's); `None` when there is none, the
 /// player has gone, or decoding failed (the error is sent).
-fn decode_next<R: Read + Send>(
-    dec: &mut StreamDecoder<R>,
-    tx: &SyncSender<Msg>,
+fn decode_next<S: GopSource>(
+    source: &mut S,
+    tx: &SyncSender<Result<ReadyGop<S::Gop>>>,
     pool: Option<&rayon::ThreadPool>,
-) -> Option<Arc<DecodedGop>> {
+) -> Option<Arc<S::Gop>> {
     let t0 = Instant::now();
     let next = match pool {
-        Some(p) => p.install(|| dec.next_gop()),
-        None => dec.next_gop(),
+        Some(p) => p.install(|| source.next_gop()),
+        None => source.next_gop(),
     };
     match next {
         Ok(Some(gop)) => {
             let ready = ReadyGop {
                 gop: gop.clone(),
                 ready: t0.elapsed(),
-                times: dec.last_gop_times(),
+                times: source.last_gop_times(),
             };
             tx.send(Ok(ready)).ok().map(|_| gop)
         }

@@ -133,7 +133,7 @@ fn the_playback_pipeline_gives_the_stream_decoders_gops() {
     let mut plain = Decoder::new(Cursor::new(&bytes[..]), Limits::default()).unwrap();
     plain.set_read_ahead(false);
     let mut stream =
-        PlaybackStream::spawn(Cursor::new(bytes.clone()), PipelineOptions::default()).unwrap();
+        PlaybackStream::open(Cursor::new(bytes.clone()), PipelineOptions::default()).unwrap();
     let scene = stream.scene().clone();
     let mut g = 0;
     while let Some(ready) = stream.next_gop().unwrap() {
@@ -168,7 +168,7 @@ fn a_damaged_gop_reaches_the_player_as_an_error() {
         c.payload_offset() as usize + 4
     };
     bytes[at] ^= 0x5a;
-    let mut stream = PlaybackStream::spawn(Cursor::new(bytes), PipelineOptions::default()).unwrap();
+    let mut stream = PlaybackStream::open(Cursor::new(bytes), PipelineOptions::default()).unwrap();
     assert_eq!(stream.next_gop().unwrap().unwrap().gop.index, 0);
     assert_eq!(stream.next_gop().unwrap().unwrap().gop.index, 1);
     let err = stream.next_gop().err().expect("GOP 2 is damaged");
