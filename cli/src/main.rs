@@ -13,6 +13,7 @@ mod play_scaffold;
 mod query_cmd;
 mod rd_cmd;
 mod rd_plot;
+mod rd_scaffold;
 mod residual_args;
 mod scene_io;
 mod seek_cmd;

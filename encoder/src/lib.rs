@@ -17,6 +17,7 @@ pub mod orientation;
 pub mod quality_search;
 mod refit_stage;
 pub mod scaffold;
+pub mod scaffold_recode;
 pub mod sequence;
 mod still;
 mod stream;
