@@ -1,7 +1,8 @@
 //! `dlgs play`: real-time playback over a plain `Read` (the file, stdin, or the file throttled
 //! to a network rate). A reader thread decodes GOPs in file order as their bytes arrive and
 //! hands them over one GOP ahead; the player decodes each frame at its presentation time and
-//! drops the frames it is too late for.
+//! drops the frames it is too late for. Scaffold-GS files (`play_scaffold`) are played by the
+//! same reader thread and frame loop, a camera per frame.
 
 use std::fs::File;
 use std::io::{BufReader, Read};
@@ -11,6 +12,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use dlgs::container::header::Variant;
 use dlgs::model::Gaussians;
 use dlgs_decoder::stream::StreamDecoder;
 use dlgs_decoder::{DecodedGop, FrameOptions};
@@ -72,63 +74,50 @@ impl<R: Read> Read for Throttled<R> {
 
 /// What the reader thread sends: a decoded GOP, the time from asking for it to having it
 /// (bytes arriving + decoding) and the decoding time alone, in ms.
-type GopMsg = dlgs::Result<(Arc<DecodedGop>, f64, f64)>;
+pub(crate) type GopMsg<G> = dlgs::Result<(Arc<G>, f64, f64)>;
 
-fn open_source(args: &PlayArgs) -> Result<Box<dyn Read + Send>> {
-    let raw: Box<dyn Read + Send> = if args.file.as_os_str() == "-" {
-        Box::new(std::io::stdin())
-    } else {
-        Box::new(
-            File::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?,
-        )
-    };
-    let buffered = BufReader::with_capacity(1 << 16, raw);
-    Ok(match args.bandwidth_mbps {
-        Some(m) if m > 0.0 && m.is_finite() => Box::new(Throttled {
-            inner: buffered,
-            bytes_per_s: m * 1e6 / 8.0,
-            start: Instant::now(),
-            delivered: 0,
-        }),
-        Some(m) => bail!("--bandwidth-mbps must be a positive number, got {m}"),
-        None => Box::new(buffered),
-    })
+/// A decoder of GOPs in file order over a `Read`: the 3DGS `StreamDecoder` and the Scaffold-GS
+/// `ScaffoldStreamDecoder`, played by the same reader thread and frame loop.
+pub(crate) trait GopStream: Send + 'static {
+    type Gop: Send + Sync + 'static;
+    fn scene(&self) -> &dlgs::container::SceneHeader;
+    fn next_gop(&mut self) -> dlgs::Result<Option<Arc<Self::Gop>>>;
+    fn last_decode_time(&self) -> Duration;
 }
 
-#[derive(Default, serde::Serialize)]
-pub(crate) struct PlayReport {
-    pub frames: u32,
-    pub shown: u32,
-    pub dropped: u32,
-    pub fps: f64,
-    pub time_to_first_frame_ms: f64,
-    pub wall_s: f64,
-    pub frame_decode_ms_mean: f64,
-    pub frame_decode_ms_p95: f64,
-    pub frame_decode_ms_max: f64,
-    pub gop_decode_ms: Vec<f64>,
-    /// Bytes arriving + decoding, per GOP.
-    pub gop_ready_ms: Vec<f64>,
-    /// Time the player waited for a GOP that had not arrived yet.
-    pub stall_ms: f64,
-    pub sustained_decode_fps: f64,
-    /// Scaffold-GS files: Gaussians generated per frame (mean), for the cameras played.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub gaussians_mean: Option<f64>,
-}
+pub(crate) type Source = Box<dyn Read + Send>;
 
-pub fn run_play(args: &PlayArgs) -> Result<()> {
-    // A file that cannot be read as .dlgs here fails below with the stream reader's error.
-    if args.file.as_os_str() != "-" && crate::scene_io::is_scaffold(&args.file).unwrap_or(false) {
-        return crate::play_scaffold::run(args);
+impl GopStream for StreamDecoder<Source> {
+    type Gop = DecodedGop;
+    fn scene(&self) -> &dlgs::container::SceneHeader {
+        StreamDecoder::scene(self)
     }
-    let opened = Instant::now();
-    let src = open_source(args)?;
-    let (tx, rx) = sync_channel::<GopMsg>(1);
+    fn next_gop(&mut self) -> dlgs::Result<Option<Arc<DecodedGop>>> {
+        StreamDecoder::next_gop(self)
+    }
+    fn last_decode_time(&self) -> Duration {
+        StreamDecoder::last_decode_time(self)
+    }
+}
+
+/// `src` (from [`open_source`]) handed to a reader thread that decodes GOPs in file order
+/// with the decoder `open` makes, one GOP ahead of the player. Returns the scene header, the
+/// GOPs' channel and the thread.
+#[allow(clippy::type_complexity)]
+pub(crate) fn spawn_reader<D: GopStream>(
+    args: &PlayArgs,
+    src: Source,
+    open: fn(Source) -> dlgs::Result<D>,
+) -> Result<(
+    dlgs::container::SceneHeader,
+    Receiver<GopMsg<D::Gop>>,
+    std::thread::JoinHandle<()>,
+)> {
+    let (tx, rx) = sync_channel::<GopMsg<D::Gop>>(1);
     let (scene_tx, scene_rx) = sync_channel(1);
     let background_threads = args.gop_threads.max(1);
     let reader = std::thread::spawn(move || {
-        let mut dec = match StreamDecoder::new(src) {
+        let mut dec = match open(src) {
             Ok(d) => d,
             Err(e) => {
                 let _ = scene_tx.send(Err(e));
@@ -181,36 +170,130 @@ pub fn run_play(args: &PlayArgs) -> Result<()> {
         .recv()
         .context("the reader thread ended before the header")?
         .context("reading the stream header")?;
+    Ok((scene, rx, reader))
+}
+
+fn open_source(args: &PlayArgs) -> Result<Source> {
+    let raw: Box<dyn Read + Send> = if args.file.as_os_str() == "-" {
+        Box::new(std::io::stdin())
+    } else {
+        Box::new(
+            File::open(&args.file).with_context(|| format!("opening {}", args.file.display()))?,
+        )
+    };
+    let buffered = BufReader::with_capacity(1 << 16, raw);
+    Ok(match args.bandwidth_mbps {
+        Some(m) if m > 0.0 && m.is_finite() => Box::new(Throttled {
+            inner: buffered,
+            bytes_per_s: m * 1e6 / 8.0,
+            start: Instant::now(),
+            delivered: 0,
+        }),
+        Some(m) => bail!("--bandwidth-mbps must be a positive number, got {m}"),
+        None => Box::new(buffered),
+    })
+}
+
+#[derive(Default, serde::Serialize)]
+pub(crate) struct PlayReport {
+    pub frames: u32,
+    pub shown: u32,
+    pub dropped: u32,
+    pub fps: f64,
+    pub time_to_first_frame_ms: f64,
+    pub wall_s: f64,
+    pub frame_decode_ms_mean: f64,
+    pub frame_decode_ms_p95: f64,
+    pub frame_decode_ms_max: f64,
+    pub gop_decode_ms: Vec<f64>,
+    /// Bytes arriving + decoding, per GOP.
+    pub gop_ready_ms: Vec<f64>,
+    /// Time the player waited for a GOP that had not arrived yet.
+    pub stall_ms: f64,
+    pub sustained_decode_fps: f64,
+    /// Scaffold-GS files: Gaussians generated per frame (mean), for the cameras played.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gaussians_mean: Option<f64>,
+}
+
+/// The stream's variant, read from its signature and `HEAD`, and the same stream with those
+/// bytes put back in front (so that stdin can be played whatever its variant).
+fn peek_variant(mut src: Source) -> Result<(Variant, Source)> {
+    use dlgs::container::chunk::{decode_header, CHUNK_HEADER_LEN};
+    use dlgs::container::header::SIGNATURE_LEN;
+    let mut head = vec![0u8; (SIGNATURE_LEN + CHUNK_HEADER_LEN) as usize];
+    src.read_exact(&mut head)
+        .context("reading the stream header: the stream ended before its HEAD chunk")?;
+    let at = SIGNATURE_LEN as usize;
+    dlgs::container::header::decode_signature(&head[..at]).context("reading the stream header")?;
+    let info = decode_header(head[at..].try_into().expect("24 bytes"), SIGNATURE_LEN)
+        .context("reading the stream header")?;
+    let limits = dlgs::Limits::default();
+    if info.ty != dlgs::container::ChunkType::HEAD || info.len > 1 << 16 {
+        bail!("reading the stream header: the first chunk is not a HEAD");
+    }
+    let start = head.len();
+    head.resize(start + info.len as usize + 4, 0);
+    src.read_exact(&mut head[start..])
+        .context("reading the stream header: the stream ended inside its HEAD chunk")?;
+    let scene = dlgs::container::SceneHeader::decode(
+        &head[start..start + info.len as usize],
+        info.payload_offset(),
+        &limits,
+    )
+    .context("reading the stream header")?;
+    Ok((
+        scene.variant,
+        Box::new(std::io::Cursor::new(head).chain(src)),
+    ))
+}
+
+pub fn run_play(args: &PlayArgs) -> Result<()> {
+    let opened = Instant::now();
+    let (variant, src) = peek_variant(open_source(args)?)?;
+    if variant == Variant::Scaffold {
+        return crate::play_scaffold::run(args, src, opened);
+    }
+    let (scene, rx, reader) = spawn_reader(args, src, StreamDecoder::new)?;
     let fps = args.fps.unwrap_or(scene.fps());
     if !(fps > 0.0 && fps.is_finite()) {
         bail!("--fps must be a positive number, got {fps}");
     }
-    let report = play_loop(args, &scene, fps, &rx, opened)?;
+    let opts = FrameOptions {
+        camera_center: [0.0; 3],
+        language: args.language,
+    };
+    let mut buffer = Gaussians::default();
+    let index = |g: &DecodedGop| g.index;
+    let report = play_loop(args, &scene, fps, &rx, opened, index, |g, time, _| {
+        let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer))?;
+        buffer = frame.dynamics;
+        Ok(())
+    })?;
     drop(rx);
     let _ = reader.join();
     print_report(&report, args.json)
 }
 
-fn play_loop(
+/// Play the frames of `scene` at `fps` as GOPs arrive on `rx`: frame f at its presentation
+/// time, `frame(gop, time, f)` decoding it; frames more than a period late are dropped.
+pub(crate) fn play_loop<G>(
     args: &PlayArgs,
     scene: &dlgs::container::SceneHeader,
     fps: f64,
-    rx: &Receiver<GopMsg>,
+    rx: &Receiver<GopMsg<G>>,
     opened: Instant,
+    index: fn(&G) -> u32,
+    mut frame: impl FnMut(&Arc<G>, dlgs::model::TimePoint, u32) -> Result<()>,
 ) -> Result<PlayReport> {
     let frames = scene.frame_count;
     let period = 1.0 / fps;
-    let opts = FrameOptions {
-        camera_center: [0.0; 3],
-        language: args.language,
-    };
     let mut r = PlayReport {
         frames,
         fps,
         ..Default::default()
     };
-    let mut gop: Option<Arc<DecodedGop>> = None;
-    let mut buffer = Gaussians::default();
+    let mut gop: Option<Arc<G>> = None;
     let mut decode_ms: Vec<f64> = Vec::new();
     let mut clock_start: Option<Instant> = None;
     let bar = indicatif::ProgressBar::new(frames as u64);
@@ -229,7 +312,7 @@ fn play_loop(
         }
         // Frame f is shown at its own time (frame index / file rate).
         let time = scene.locate(f as f64 / scene.fps())?;
-        if gop.as_ref().map(|g| g.index) != Some(time.gop) {
+        if gop.as_deref().map(index) != Some(time.gop) {
             let wait = Instant::now();
             loop {
                 let (g, arrival_ms, ms) = rx
@@ -238,7 +321,7 @@ fn play_loop(
                     .with_context(|| format!("decoding the GOP of frame {f}"))?;
                 r.gop_decode_ms.push(ms);
                 r.gop_ready_ms.push(arrival_ms);
-                let done = g.index >= time.gop;
+                let done = index(&g) >= time.gop;
                 gop = Some(g);
                 if done {
                     break;
@@ -250,10 +333,8 @@ fn play_loop(
         }
         let g = gop.as_ref().expect("set above");
         let t0 = Instant::now();
-        let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer))
-            .with_context(|| format!("decoding frame {f}"))?;
+        frame(g, time, f).with_context(|| format!("decoding frame {f}"))?;
         decode_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-        buffer = frame.dynamics;
         r.shown += 1;
         bar.inc(1);
         let start = *clock_start.get_or_insert_with(|| {
@@ -312,16 +393,11 @@ pub(crate) fn print_report(r: &PlayReport, json: bool) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    if r.gaussians_mean.is_some() {
-        // Scaffold-GS: GOPs are decoded on the player's thread, from the file.
-        println!("GOP decode (player thread): {} ms", list(&r.gop_decode_ms));
-    } else {
-        println!(
-            "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
-            list(&r.gop_decode_ms),
-            list(&r.gop_ready_ms)
-        );
-    }
+    println!(
+        "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
+        list(&r.gop_decode_ms),
+        list(&r.gop_ready_ms)
+    );
     println!("player stalled {:.1} ms waiting for GOPs", r.stall_ms);
     if let Some(n) = r.gaussians_mean {
         println!("Scaffold-GS: {n:.0} neural Gaussians per frame (mean)");

@@ -148,10 +148,74 @@ fn play_decodes_every_frame_for_the_camera() {
     // Orbit camera 0 placed inside the scene sees a small part of it: culling decodes the
     // children of far fewer anchors.
     assert!(means[0] < 0.5 * means[1] && means[1] > 1000.0, "{means:?}");
-    // A throttled Scaffold-GS file is refused with the reason (no streaming reader for it).
-    let o = run(&["play", file.to_str().unwrap(), "--bandwidth-mbps", "10"]);
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("random access"));
+}
+
+/// `dlgs play` of a Scaffold-GS stream from stdin and at a network rate: the GOPs decode as
+/// their bytes arrive (`ScaffoldStreamDecoder`) and the frames are those played from the file;
+/// a stream cut short plays up to the damage, then fails with the reason.
+#[test]
+fn play_streams_scaffold_files_from_stdin_and_at_a_bandwidth() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let file = encoded(dir.path());
+    let bytes = std::fs::read(&file).unwrap();
+    let cams = fixture().join("reference_decode/cameras.json");
+    let base = [
+        "--max-speed",
+        "--json",
+        "--cameras",
+        cams.to_str().unwrap(),
+        "--view",
+        "1",
+    ];
+    let play = |src: &str, extra: &[&str], stdin: Stdio| {
+        Command::new(env!("CARGO_BIN_EXE_dlgs"))
+            .args(["play", src])
+            .args(base)
+            .args(extra)
+            .env("RUST_BACKTRACE", "0")
+            .stdin(stdin)
+            .output()
+            .unwrap()
+    };
+    let from_file = json_of(&play(file.to_str().unwrap(), &[], Stdio::null()));
+    let from_stdin = json_of(&play(
+        "-",
+        &[],
+        Stdio::from(std::fs::File::open(&file).unwrap()),
+    ));
+    // 8 Mbit/s: GOP 0 (about 384 kB) cannot be ready before about 0.38 s.
+    let throttled = json_of(&play(
+        file.to_str().unwrap(),
+        &["--bandwidth-mbps", "8"],
+        Stdio::null(),
+    ));
+    for r in [&from_file, &from_stdin, &throttled] {
+        assert_eq!(
+            (
+                r["frames"].as_u64(),
+                r["shown"].as_u64(),
+                r["dropped"].as_u64()
+            ),
+            (Some(120), Some(120), Some(0)),
+            "{r}"
+        );
+        assert_eq!(r["gop_decode_ms"].as_array().unwrap().len(), 2, "{r}");
+        // The same camera and frames: the same neural Gaussians.
+        assert_eq!(r["gaussians_mean"], from_file["gaussians_mean"], "{r}");
+    }
+    let ready = throttled["gop_ready_ms"][0].as_f64().unwrap();
+    assert!(ready > 300.0, "GOP 0 ready after {ready} ms at 8 Mbit/s");
+    assert!(throttled["time_to_first_frame_ms"].as_f64().unwrap() > 300.0);
+    // 90 % of the stream (GOP 0 is the first 72 %) over stdin: GOP 0 plays, then a clear error.
+    let cut = dir.path().join("cut.dlgs");
+    std::fs::write(&cut, &bytes[..bytes.len() * 9 / 10]).unwrap();
+    let o = play("-", &[], Stdio::from(std::fs::File::open(&cut).unwrap()));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("decoding the GOP of frame 60"),
+        "{e}"
+    );
 }
 
 #[test]
