@@ -24,6 +24,8 @@ use crate::encode_cmd::bar;
 /// Frames per GOP and key interval of the reference's HAC runs (../shared/reference §0).
 const GOP_LENGTH: u32 = 60;
 const KEY_INTERVAL: u32 = 10;
+/// zstd level of the chunks written (`dlgs rd` re-codes anchors with the same).
+pub const ZSTD_LEVEL: i32 = 19;
 
 /// The `compression/best` folder of a HAC GOP, if `p` is or holds one.
 fn best_dir(p: &Path) -> Option<PathBuf> {
@@ -145,7 +147,7 @@ pub fn run_hac_ingest(
     if sequential {
         scene.residual_mode = ResidualMode::Sequential;
     }
-    let mut w = ScaffoldWriter::new(Vec::new(), scene, 19)?;
+    let mut w = ScaffoldWriter::new(Vec::new(), scene, ZSTD_LEVEL)?;
     let meta = serde_json::json!({
         "source": "DLGStream reference implementation output (HAC / Scaffold-GS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
@@ -454,7 +456,7 @@ pub fn run_ahac_bench(run: &Path, ply: Option<&Path>, anchors: usize, repeat: us
     }
     for (name, h) in cases {
         let scene = scaffold_scene(h.n_static, h.n_dynamic, true, 30, 60, 10, 60);
-        let (payload, sizes) = dlgs::chunks::ahac::encode(&h, &scene, 19)?;
+        let (payload, sizes) = dlgs::chunks::ahac::encode(&h, &scene, ZSTD_LEVEL)?;
         println!(
             "{name}: {} anchors, {} bytes ({} in the symbol streams)",
             h.quantized.len(),

@@ -13,6 +13,7 @@ mod play_scaffold;
 mod query_cmd;
 mod rd_cmd;
 mod rd_plot;
+mod rd_scaffold;
 mod residual_args;
 mod scene_io;
 mod seek_cmd;
@@ -192,7 +193,8 @@ enum Cmd {
     Play(play_cmd::PlayArgs),
     /// Rate-distortion sweep: encode a model at every crf x quality x bits setting, decode
     /// every frame, render sampled times from the cameras; CSV + PNG plots (bytes/frame vs
-    /// PSNR, decode ms/frame vs PSNR).
+    /// PSNR, decode ms/frame vs PSNR). A Scaffold-GS file sweeps its anchor steps instead
+    /// (--anchor-step-scale), re-coded from the file itself.
     Rd(rd_cmd::RdArgs),
     /// Write the cameras a scene would be rendered with (orbit or selection) as cameras.json.
     Cameras {

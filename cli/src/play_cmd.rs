@@ -1,7 +1,9 @@
 //! `dlgs play`: real-time playback over a plain `Read` (the file, stdin, or the file throttled
-//! to a network rate). A reader thread decodes GOPs in file order as their bytes arrive and
-//! hands them over one GOP ahead; the player decodes each frame at its presentation time and
-//! drops the frames it is too late for.
+//! to a network rate) through the library's playback pipeline (`dlgs_decoder::pipeline`): a
+//! reader thread decodes GOPs in file order as their bytes arrive, ahead of the player, which
+//! decodes each frame at its presentation time and drops the frames it is too late for.
+//! Scaffold-GS streams (`play_scaffold`) go through the same pipeline and frame loop, a camera
+//! per frame.
 
 use std::fs::File;
 use std::io::{BufReader, Read};
@@ -10,8 +12,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use dlgs::container::header::Variant;
 use dlgs::model::Gaussians;
 use dlgs_decoder::pipeline::{PipelineOptions, PlaybackStream, ReadyGop};
+use dlgs_decoder::stream::StreamDecoder;
 use dlgs_decoder::{DecodedGop, FrameOptions};
 
 #[derive(clap::Args)]
@@ -48,6 +52,9 @@ pub struct PlayArgs {
     pub no_cull: bool,
 }
 
+/// The bytes being played: the file, stdin, either throttled.
+pub(crate) type Source = Box<dyn Read + Send>;
+
 /// A `Read` that delivers at most `bytes_per_s`, sleeping as a slow link would.
 struct Throttled<R> {
     inner: R,
@@ -69,7 +76,7 @@ impl<R: Read> Read for Throttled<R> {
     }
 }
 
-fn open_source(args: &PlayArgs) -> Result<Box<dyn Read + Send>> {
+fn open_source(args: &PlayArgs) -> Result<Source> {
     let raw: Box<dyn Read + Send> = if args.file.as_os_str() == "-" {
         Box::new(std::io::stdin())
     } else {
@@ -120,47 +127,100 @@ pub(crate) struct PlayReport {
     pub gaussians_mean: Option<f64>,
 }
 
-pub fn run_play(args: &PlayArgs) -> Result<()> {
-    // A file that cannot be read as .dlgs here fails below with the stream reader's error.
-    if args.file.as_os_str() != "-" && crate::scene_io::is_scaffold(&args.file).unwrap_or(false) {
-        return crate::play_scaffold::run(args);
+/// The stream's variant, read from its signature and `HEAD`, and the same stream with those
+/// bytes put back in front (so that stdin can be played whatever its variant).
+fn peek_variant(mut src: Source) -> Result<(Variant, Source)> {
+    use dlgs::container::chunk::{decode_header, CHUNK_HEADER_LEN};
+    use dlgs::container::header::SIGNATURE_LEN;
+    let mut head = vec![0u8; (SIGNATURE_LEN + CHUNK_HEADER_LEN) as usize];
+    src.read_exact(&mut head)
+        .context("reading the stream header: the stream ended before its HEAD chunk")?;
+    let at = SIGNATURE_LEN as usize;
+    dlgs::container::header::decode_signature(&head[..at]).context("reading the stream header")?;
+    let info = decode_header(head[at..].try_into().expect("24 bytes"), SIGNATURE_LEN)
+        .context("reading the stream header")?;
+    let limits = dlgs::Limits::default();
+    if info.ty != dlgs::container::ChunkType::HEAD || info.len > 1 << 16 {
+        bail!("reading the stream header: the first chunk is not a HEAD");
     }
-    let opened = Instant::now();
-    let src = open_source(args)?;
-    let opts = PipelineOptions {
+    let start = head.len();
+    head.resize(start + info.len as usize + 4, 0);
+    src.read_exact(&mut head[start..])
+        .context("reading the stream header: the stream ended inside its HEAD chunk")?;
+    let scene = dlgs::container::SceneHeader::decode(
+        &head[start..start + info.len as usize],
+        info.payload_offset(),
+        &limits,
+    )
+    .context("reading the stream header")?;
+    Ok((
+        scene.variant,
+        Box::new(std::io::Cursor::new(head).chain(src)),
+    ))
+}
+
+/// The pipeline's options from the command line.
+pub(crate) fn pipeline_options(args: &PlayArgs) -> PipelineOptions {
+    PipelineOptions {
         gop_threads: args.gop_threads.max(1),
         ..Default::default()
-    };
-    let mut stream = PlaybackStream::open(src, opts).context("reading the stream header")?;
+    }
+}
+
+pub fn run_play(args: &PlayArgs) -> Result<()> {
+    let opened = Instant::now();
+    let (variant, src) = peek_variant(open_source(args)?)?;
+    if variant == Variant::Scaffold {
+        return crate::play_scaffold::run(args, src, opened);
+    }
+    let dec = StreamDecoder::new(src).context("reading the stream header")?;
+    let mut stream = PlaybackStream::spawn(dec, pipeline_options(args))?;
     let scene = stream.scene().clone();
     let fps = args.fps.unwrap_or(scene.fps());
     if !(fps > 0.0 && fps.is_finite()) {
         bail!("--fps must be a positive number, got {fps}");
     }
-    let report = play_loop(args, &scene, fps, &mut stream, opened)?;
-    print_report(&report, args.json)
-}
-
-fn play_loop(
-    args: &PlayArgs,
-    scene: &dlgs::container::SceneHeader,
-    fps: f64,
-    stream: &mut PlaybackStream,
-    opened: Instant,
-) -> Result<PlayReport> {
-    let frames = scene.frame_count;
-    let period = 1.0 / fps;
     let opts = FrameOptions {
         camera_center: [0.0; 3],
         language: args.language,
     };
+    let mut buffer = Gaussians::default();
+    let index = |g: &DecodedGop| g.index;
+    let report = play_loop(
+        args,
+        &scene,
+        fps,
+        &mut stream,
+        opened,
+        index,
+        |g, time, _| {
+            let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer))?;
+            buffer = frame.dynamics;
+            Ok(())
+        },
+    )?;
+    print_report(&report, args.json)
+}
+
+/// Play the frames of `scene` at `fps` as GOPs arrive from `stream`: frame f at its presentation
+/// time, `frame(gop, time, f)` decoding it; frames more than a period late are dropped.
+pub(crate) fn play_loop<G: Send + Sync + 'static>(
+    args: &PlayArgs,
+    scene: &dlgs::container::SceneHeader,
+    fps: f64,
+    stream: &mut PlaybackStream<G>,
+    opened: Instant,
+    index: fn(&G) -> u32,
+    mut frame: impl FnMut(&Arc<G>, dlgs::model::TimePoint, u32) -> Result<()>,
+) -> Result<PlayReport> {
+    let frames = scene.frame_count;
+    let period = 1.0 / fps;
     let mut r = PlayReport {
         frames,
         fps,
         ..Default::default()
     };
-    let mut gop: Option<Arc<DecodedGop>> = None;
-    let mut buffer = Gaussians::default();
+    let mut gop: Option<Arc<G>> = None;
     let mut decode_ms: Vec<f64> = Vec::new();
     let mut clock_start: Option<Instant> = None;
     let bar = indicatif::ProgressBar::new(frames as u64);
@@ -179,7 +239,7 @@ fn play_loop(
         }
         // Frame f is shown at its own time (frame index / file rate).
         let time = scene.locate(f as f64 / scene.fps())?;
-        if gop.as_ref().map(|g| g.index) != Some(time.gop) {
+        if gop.as_deref().map(index) != Some(time.gop) {
             let wait = Instant::now();
             loop {
                 let ready = stream
@@ -187,7 +247,7 @@ fn play_loop(
                     .with_context(|| format!("decoding the GOP of frame {f}"))?
                     .with_context(|| format!("the stream ended before the GOP of frame {f}"))?;
                 r.record_gop(&ready);
-                let done = ready.gop.index >= time.gop;
+                let done = index(&ready.gop) >= time.gop;
                 gop = Some(ready.gop);
                 if done {
                     break;
@@ -199,10 +259,8 @@ fn play_loop(
         }
         let g = gop.as_ref().expect("set above");
         let t0 = Instant::now();
-        let frame = DecodedGop::frame(g, time, &opts, std::mem::take(&mut buffer))
-            .with_context(|| format!("decoding frame {f}"))?;
+        frame(g, time, f).with_context(|| format!("decoding frame {f}"))?;
         decode_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-        buffer = frame.dynamics;
         r.shown += 1;
         bar.inc(1);
         let start = *clock_start.get_or_insert_with(|| {
@@ -223,7 +281,7 @@ fn play_loop(
 }
 
 impl PlayReport {
-    fn record_gop(&mut self, ready: &ReadyGop) {
+    fn record_gop<G>(&mut self, ready: &ReadyGop<G>) {
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
         self.gop_decode_ms.push(ms(ready.times.total));
         self.gop_ready_ms.push(ms(ready.ready));
@@ -273,15 +331,13 @@ pub(crate) fn print_report(r: &PlayReport, json: bool) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    if r.gaussians_mean.is_some() {
-        // Scaffold-GS: GOPs are decoded on the player's thread, from the file.
-        println!("GOP decode (player thread): {} ms", list(&r.gop_decode_ms));
-    } else {
-        println!(
-            "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
-            list(&r.gop_decode_ms),
-            list(&r.gop_ready_ms)
-        );
+    println!(
+        "GOP decode (reader thread): {} ms; with bytes arriving: {} ms",
+        list(&r.gop_decode_ms),
+        list(&r.gop_ready_ms)
+    );
+    // The 3DGS decoder times its stages; the Scaffold-GS one only the whole GOP.
+    if r.gop_state_ms.iter().any(|&m| m > 0.0) {
         println!(
             "  of which canonical state: {} ms; time features + decoders: {} ms; keys: {} ms",
             list(&r.gop_state_ms),

@@ -1,7 +1,8 @@
 //! `dlgs rd`: rate-distortion sweep. Encodes a model at every setting (crf x canonical
 //! quality x bits), decodes every frame in order (decode time per frame), renders sampled
 //! times from the cameras, and writes PSNR / SSIM against the model itself to a CSV plus two
-//! PNG plots (bytes per frame vs PSNR, decode ms per frame vs PSNR).
+//! PNG plots (bytes per frame vs PSNR, decode ms per frame vs PSNR). Scaffold-GS files sweep
+//! their anchor steps instead (`rd_scaffold`), into the same table, CSV and plots.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -14,19 +15,21 @@ use dlgs_render::{metrics, render, Camera, RenderOptions};
 use crate::cameras_arg::CameraArgs;
 use crate::encode_cmd::{encode_file, CodecArgs};
 use crate::rd_plot::{self, Point};
-use crate::scene_io::{is_dlgs, Source};
+use crate::scene_io::{is_dlgs, is_scaffold, Source};
 
 #[derive(clap::Args)]
 pub struct RdArgs {
     /// The reference model: a .dlgs (ideally lossless, e.g. from `dlgs synth`) or a splat
-    /// scene; PSNR is measured against it.
+    /// scene; PSNR is measured against it. A Scaffold-GS .dlgs (e.g. from `dlgs encode
+    /// HAC_RUN`) is re-coded from the file itself at each --anchor-step-scale.
     pub model: PathBuf,
-    /// x265 crf values to sweep (time features; ignored for still scenes).
-    #[arg(long, default_value = "6,10,14,18,24")]
-    pub crf: String,
-    /// Canonical quality presets to sweep (lossless, high, medium, low).
-    #[arg(long, default_value = "high")]
-    pub quality: String,
+    /// x265 crf values to sweep (time features; ignored for still scenes) [default:
+    /// 6,10,14,18,24].
+    #[arg(long)]
+    pub crf: Option<String>,
+    /// Canonical quality presets to sweep (lossless, high, medium, low) [default: high].
+    #[arg(long)]
+    pub quality: Option<String>,
     /// Canonical bit settings to sweep, `;`-separated, each as `dlgs encode --bits`
     /// (e.g. `position=16;position=14,sh_rest=5`); crossed with --quality.
     #[arg(long)]
@@ -34,6 +37,11 @@ pub struct RdArgs {
     /// Extra `dlgs encode` flags for every setting, e.g. "--preset fast --mlp-f16".
     #[arg(long, allow_hyphen_values = true, default_value = "")]
     pub encode_flags: String,
+    /// Scaffold-GS files only: anchor step scales to sweep (`dlgs encode HAC_RUN
+    /// --anchor-step-scale`), relative to the file's steps; the file's HAC-coded anchors
+    /// (`AHAC`) are decoded and re-coded at each, every other chunk kept [default: 1,2,4,8].
+    #[arg(long)]
+    pub anchor_step_scale: Option<String>,
     /// Times rendered per setting, evenly spread over the model (GOP starts included).
     #[arg(long, default_value_t = 4)]
     pub times: usize,
@@ -54,17 +62,37 @@ struct EncodeFlags {
 }
 
 /// One point of the sweep.
-struct Setting {
-    quality: String,
-    bits: Option<String>,
-    crf: Option<u8>,
+pub(crate) struct Setting {
+    pub quality: String,
+    pub bits: Option<String>,
+    pub crf: Option<u8>,
+    /// Scaffold-GS: the anchor step scale (then `quality` is [`ANCHOR_STEPS`]).
+    pub anchor_step_scale: Option<f32>,
 }
+
+/// The `quality` column of Scaffold-GS rows (the family of the anchor step sweep).
+pub(crate) const ANCHOR_STEPS: &str = "anchor-steps";
 
 impl Setting {
     fn family(&self) -> String {
         match &self.bits {
             Some(b) => format!("{} {b}", self.quality),
             None => self.quality.clone(),
+        }
+    }
+    /// The setting as the table shows it.
+    fn name(&self) -> String {
+        match self.anchor_step_scale {
+            Some(k) => format!("anchor-step-scale {k}"),
+            None => self.family(),
+        }
+    }
+    /// The point's label in the plots.
+    fn label(&self) -> String {
+        match (self.crf, self.anchor_step_scale) {
+            (Some(c), _) => format!(" crf {c}"),
+            (None, Some(k)) => format!(" k={k}"),
+            (None, None) => String::new(),
         }
     }
     fn codec(&self, extra: &str) -> Result<CodecArgs> {
@@ -82,17 +110,19 @@ impl Setting {
     }
 }
 
-struct Row {
-    setting: Setting,
-    bytes: u64,
-    frames: u32,
-    psnr: f64,
-    ssim: f64,
-    decode_ms_per_frame: f64,
-    encode_s: f64,
+pub(crate) struct Row {
+    pub setting: Setting,
+    pub bytes: u64,
+    pub frames: u32,
+    pub psnr: f64,
+    pub ssim: f64,
+    /// PSNR of the language feature images (files with language; Scaffold-GS sweeps only).
+    pub lang_psnr: Option<f64>,
+    pub decode_ms_per_frame: f64,
+    pub encode_s: f64,
 }
 
-fn list<T: std::str::FromStr>(s: &str, what: &str) -> Result<Vec<T>> {
+pub(crate) fn list<T: std::str::FromStr>(s: &str, what: &str) -> Result<Vec<T>> {
     s.split(',')
         .filter(|x| !x.trim().is_empty())
         .map(|x| {
@@ -104,7 +134,7 @@ fn list<T: std::str::FromStr>(s: &str, what: &str) -> Result<Vec<T>> {
 }
 
 /// Sampled times: evenly spread, starting at 0.
-fn sample_times(src: &Source, n: usize) -> Vec<f64> {
+pub(crate) fn sample_times(src: &Source, n: usize) -> Vec<f64> {
     match src.timing() {
         None => vec![0.0],
         Some((fps, frames)) => {
@@ -135,13 +165,22 @@ fn decode_ms_per_frame(file: &Path) -> Result<f64> {
     Ok(t0.elapsed().as_secs_f64() * 1e3 / frames as f64)
 }
 
-/// Colour renders of `src` at every (time, camera).
-fn renders(src: &mut Source, times: &[f64], cams: &[Camera]) -> Result<Vec<dlgs_render::Image>> {
-    let opts = RenderOptions::default();
+/// Colour renders (with `language`, the language feature images too) of `src` at every
+/// (time, camera). Scaffold-GS files decode only the anchors in view: the same image.
+pub(crate) fn renders(
+    src: &mut Source,
+    times: &[f64],
+    cams: &[Camera],
+    language: bool,
+) -> Result<Vec<dlgs_render::Image>> {
+    let opts = RenderOptions {
+        features: language,
+        ..RenderOptions::default()
+    };
     let mut out = Vec::new();
     for &t in times {
         for cam in cams {
-            let g = src.at(t, cam.position.to_array(), false)?;
+            let g = src.at_camera(t, cam, language, true)?;
             out.push(render(&g, cam, &opts).map_err(anyhow::Error::msg)?);
         }
     }
@@ -158,21 +197,25 @@ fn read_csv(path: &Path) -> Result<Vec<Row>> {
         // The bits column is quoted and may hold commas.
         let (head, rest) = line.split_once(",\"").ok_or_else(bad)?;
         let (bits, tail) = rest.split_once("\",").ok_or_else(bad)?;
+        // Since the Scaffold-GS sweep: two more columns (anchor step scale, language PSNR).
         let f: Vec<&str> = tail.split(',').collect();
-        if f.len() != 8 {
+        if f.len() != 8 && f.len() != 10 {
             return Err(bad());
         }
         let num = |k: usize| f[k].parse::<f64>().map_err(|_| bad());
+        let opt = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok());
         rows.push(Row {
             setting: Setting {
                 quality: head.to_string(),
                 bits: (!bits.is_empty()).then(|| bits.to_string()),
                 crf: f[0].parse().ok(),
+                anchor_step_scale: opt(8).map(|k| k as f32),
             },
             bytes: num(1)? as u64,
             frames: num(2)? as u32,
             psnr: num(4)?,
             ssim: num(5)?,
+            lang_psnr: opt(9),
             decode_ms_per_frame: num(6)?,
             encode_s: num(7)?,
         });
@@ -186,12 +229,24 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
         return plots(a, &rows);
     }
     let dynamic = is_dlgs(&a.model);
+    if dynamic && is_scaffold(&a.model)? {
+        return crate::rd_scaffold::run(a);
+    }
+    if a.anchor_step_scale.is_some() {
+        bail!(
+            "--anchor-step-scale sweeps the anchors of Scaffold-GS files; {} is not one",
+            a.model.display()
+        );
+    }
     let crfs: Vec<Option<u8>> = if dynamic {
-        list::<u8>(&a.crf, "crf")?.into_iter().map(Some).collect()
+        list::<u8>(a.crf.as_deref().unwrap_or("6,10,14,18,24"), "crf")?
+            .into_iter()
+            .map(Some)
+            .collect()
     } else {
         vec![None]
     };
-    let qualities: Vec<String> = list(&a.quality, "quality")?;
+    let qualities: Vec<String> = list(a.quality.as_deref().unwrap_or("high"), "quality")?;
     let bits: Vec<Option<String>> = match &a.bits {
         Some(b) => b.split(';').map(|s| Some(s.trim().to_string())).collect(),
         None => vec![None],
@@ -204,6 +259,7 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
                     quality: q.clone(),
                     bits: b.clone(),
                     crf,
+                    anchor_step_scale: None,
                 });
             }
         }
@@ -221,7 +277,7 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
     let mut reference = Source::open(&a.model)?;
     let cams = a.cams.resolve(&reference.canonical(0.0)?)?;
     let times = sample_times(&reference, a.times);
-    let ref_images = renders(&mut reference, &times, &cams)?;
+    let ref_images = renders(&mut reference, &times, &cams, false)?;
 
     let bar = indicatif::ProgressBar::new(settings.len() as u64);
     bar.set_style(
@@ -238,7 +294,7 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
         let bytes = std::fs::metadata(&tmp)?.len();
         let decode_ms_per_frame = decode_ms_per_frame(&tmp)?;
         let mut test = Source::open(&tmp)?;
-        let images = renders(&mut test, &times, &cams)?;
+        let images = renders(&mut test, &times, &cams, false)?;
         let (mut psnr, mut ssim) = (0.0, 0.0);
         for (r, t) in ref_images.iter().zip(&images) {
             psnr += metrics::psnr(&r.color, &t.color);
@@ -251,6 +307,7 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
             frames,
             psnr: psnr / n,
             ssim: ssim / n,
+            lang_psnr: None,
             decode_ms_per_frame,
             encode_s,
         });
@@ -261,20 +318,32 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
     write_outputs(a, &rows, times.len() * cams.len())
 }
 
-fn write_outputs(a: &RdArgs, rows: &[Row], views: usize) -> Result<()> {
+pub(crate) fn write_outputs(a: &RdArgs, rows: &[Row], views: usize) -> Result<()> {
     let mut csv = String::from(
-        "quality,bits,crf,bytes,frames,bytes_per_frame,psnr_db,ssim,decode_ms_per_frame,encode_s\n",
+        "quality,bits,crf,bytes,frames,bytes_per_frame,psnr_db,ssim,decode_ms_per_frame,encode_s,\
+         anchor_step_scale,lang_psnr_db\n",
     );
+    let lang = rows.iter().any(|r| r.lang_psnr.is_some());
     println!(
-        "{:<24} {:>4} {:>11} {:>13} {:>9} {:>8} {:>10} {:>9}",
-        "setting", "crf", "bytes", "bytes/frame", "PSNR dB", "SSIM", "decode ms", "encode s"
+        "{:<24} {:>4} {:>11} {:>13} {:>9} {:>8} {:>10} {:>9}{}",
+        "setting",
+        "crf",
+        "bytes",
+        "bytes/frame",
+        "PSNR dB",
+        "SSIM",
+        "decode ms",
+        "encode s",
+        if lang { "  lang dB" } else { "" }
     );
     for r in rows {
         let s = &r.setting;
         let crf = s.crf.map_or(String::new(), |c| c.to_string());
         let bpf = r.bytes as f64 / r.frames as f64;
+        let k = s.anchor_step_scale.map_or(String::new(), |k| k.to_string());
+        let lang_db = r.lang_psnr.map_or(String::new(), |p| format!("{p:.3}"));
         csv += &format!(
-            "{},\"{}\",{},{},{},{:.1},{:.3},{:.5},{:.3},{:.2}\n",
+            "{},\"{}\",{},{},{},{:.1},{:.3},{:.5},{:.3},{:.2},{k},{lang_db}\n",
             s.quality,
             s.bits.as_deref().unwrap_or(""),
             crf,
@@ -287,15 +356,16 @@ fn write_outputs(a: &RdArgs, rows: &[Row], views: usize) -> Result<()> {
             r.encode_s
         );
         println!(
-            "{:<24} {:>4} {:>11} {:>13.1} {:>9.2} {:>8.5} {:>10.3} {:>9.2}",
-            s.family(),
+            "{:<24} {:>4} {:>11} {:>13.1} {:>9.2} {:>8.5} {:>10.3} {:>9.2}{}",
+            s.name(),
             crf,
             r.bytes,
             bpf,
             r.psnr,
             r.ssim,
             r.decode_ms_per_frame,
-            r.encode_s
+            r.encode_s,
+            r.lang_psnr.map_or(String::new(), |p| format!(" {p:>8.2}"))
         );
     }
     let csv_path = a.output.join("rd.csv");
@@ -304,6 +374,12 @@ fn write_outputs(a: &RdArgs, rows: &[Row], views: usize) -> Result<()> {
         "PSNR/SSIM: mean over {views} renders (times x cameras) against {}",
         a.model.display()
     );
+    if lang {
+        println!(
+            "language PSNR: peak = the range of the reference's language feature values, \
+             mean over the same renders"
+        );
+    }
     println!("-> {}", csv_path.display());
     plots(a, rows)
 }
@@ -317,7 +393,7 @@ fn plots(a: &RdArgs, rows: &[Row]) -> Result<()> {
             None => families.push((f, vec![r])),
         }
     }
-    let label = |r: &Row| r.setting.crf.map_or(String::new(), |c| format!(" crf {c}"));
+    let label = |r: &Row| r.setting.label();
     let series = |x: &dyn Fn(&Row) -> f64| -> Vec<(String, Vec<Point>)> {
         families
             .iter()

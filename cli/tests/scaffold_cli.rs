@@ -148,10 +148,74 @@ fn play_decodes_every_frame_for_the_camera() {
     // Orbit camera 0 placed inside the scene sees a small part of it: culling decodes the
     // children of far fewer anchors.
     assert!(means[0] < 0.5 * means[1] && means[1] > 1000.0, "{means:?}");
-    // A throttled Scaffold-GS file is refused with the reason (no streaming reader for it).
-    let o = run(&["play", file.to_str().unwrap(), "--bandwidth-mbps", "10"]);
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("random access"));
+}
+
+/// `dlgs play` of a Scaffold-GS stream from stdin and at a network rate: the GOPs decode as
+/// their bytes arrive (`ScaffoldStreamDecoder`) and the frames are those played from the file;
+/// a stream cut short plays up to the damage, then fails with the reason.
+#[test]
+fn play_streams_scaffold_files_from_stdin_and_at_a_bandwidth() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let file = encoded(dir.path());
+    let bytes = std::fs::read(&file).unwrap();
+    let cams = fixture().join("reference_decode/cameras.json");
+    let base = [
+        "--max-speed",
+        "--json",
+        "--cameras",
+        cams.to_str().unwrap(),
+        "--view",
+        "1",
+    ];
+    let play = |src: &str, extra: &[&str], stdin: Stdio| {
+        Command::new(env!("CARGO_BIN_EXE_dlgs"))
+            .args(["play", src])
+            .args(base)
+            .args(extra)
+            .env("RUST_BACKTRACE", "0")
+            .stdin(stdin)
+            .output()
+            .unwrap()
+    };
+    let from_file = json_of(&play(file.to_str().unwrap(), &[], Stdio::null()));
+    let from_stdin = json_of(&play(
+        "-",
+        &[],
+        Stdio::from(std::fs::File::open(&file).unwrap()),
+    ));
+    // 8 Mbit/s: GOP 0 (about 384 kB) cannot be ready before about 0.38 s.
+    let throttled = json_of(&play(
+        file.to_str().unwrap(),
+        &["--bandwidth-mbps", "8"],
+        Stdio::null(),
+    ));
+    for r in [&from_file, &from_stdin, &throttled] {
+        assert_eq!(
+            (
+                r["frames"].as_u64(),
+                r["shown"].as_u64(),
+                r["dropped"].as_u64()
+            ),
+            (Some(120), Some(120), Some(0)),
+            "{r}"
+        );
+        assert_eq!(r["gop_decode_ms"].as_array().unwrap().len(), 2, "{r}");
+        // The same camera and frames: the same neural Gaussians.
+        assert_eq!(r["gaussians_mean"], from_file["gaussians_mean"], "{r}");
+    }
+    let ready = throttled["gop_ready_ms"][0].as_f64().unwrap();
+    assert!(ready > 300.0, "GOP 0 ready after {ready} ms at 8 Mbit/s");
+    assert!(throttled["time_to_first_frame_ms"].as_f64().unwrap() > 300.0);
+    // 90 % of the stream (GOP 0 is the first 72 %) over stdin: GOP 0 plays, then a clear error.
+    let cut = dir.path().join("cut.dlgs");
+    std::fs::write(&cut, &bytes[..bytes.len() * 9 / 10]).unwrap();
+    let o = play("-", &[], Stdio::from(std::fs::File::open(&cut).unwrap()));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("decoding the GOP of frame 60"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -268,4 +332,94 @@ fn export_writes_sog_that_reads_back() {
         .flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs() / (1.0 + p[k].abs())))
         .fold(0f32, f32::max);
     assert!(worst < 1e-3, "{worst}");
+}
+
+/// `dlgs rd` of a Scaffold-GS file sweeps the anchor steps, re-coding the file's own `AHAC`:
+/// k = 1 is the file itself (its bytes, infinite PSNR), larger steps cost bytes less and
+/// quality more, and each k gives the file `dlgs encode HAC_RUN --anchor-step-scale k` writes.
+#[test]
+fn rd_sweeps_the_anchor_steps_of_a_scaffold_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = encoded(dir.path());
+    let len = std::fs::metadata(&file).unwrap().len();
+    let k2 = dir.path().join("k2.dlgs");
+    let o = run(&[
+        "encode",
+        fixture().to_str().unwrap(),
+        "--anchor-step-scale",
+        "2",
+        "-o",
+        k2.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let k2_len = std::fs::metadata(&k2).unwrap().len();
+    let cams = fixture().join("reference_decode/cameras.json");
+    let out = dir.path().join("rd");
+    let o = run(&[
+        "rd",
+        file.to_str().unwrap(),
+        "--anchor-step-scale",
+        "1,2,8",
+        "--times",
+        "2",
+        "--cameras",
+        cams.to_str().unwrap(),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        text.contains("anchor-step-scale 8") && text.contains("lang dB"),
+        "{text}"
+    );
+    let csv = std::fs::read_to_string(out.join("rd.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert!(
+        lines[0].ends_with("anchor_step_scale,lang_psnr_db"),
+        "{csv}"
+    );
+    let rows: Vec<Vec<&str>> = lines[1..].iter().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 3, "{csv}");
+    // Columns: quality,bits,crf,bytes,frames,bytes_per_frame,psnr_db,ssim,decode_ms_per_frame,
+    // encode_s,anchor_step_scale,lang_psnr_db
+    let col = |r: &Vec<&str>, i: usize| r[i].parse::<f64>().unwrap();
+    for (r, k) in rows.iter().zip([1.0, 2.0, 8.0]) {
+        assert_eq!((r[0], col(r, 10), col(r, 4)), ("anchor-steps", k, 120.0));
+        assert!(col(r, 8) > 0.0);
+    }
+    // k = 1: the file itself, lossless in colour and language.
+    assert_eq!(col(&rows[0], 3), len as f64);
+    assert!(col(&rows[0], 6).is_infinite() && col(&rows[0], 11).is_infinite());
+    assert_eq!(col(&rows[0], 7), 1.0);
+    // k = 2: the bytes of the file written from the run with that step.
+    assert_eq!(col(&rows[1], 3), k2_len as f64);
+    // Fewer bytes and less quality as the steps grow.
+    assert!(col(&rows[0], 3) > col(&rows[1], 3) && col(&rows[1], 3) > col(&rows[2], 3));
+    for i in [6, 11] {
+        let (p2, p8) = (col(&rows[1], i), col(&rows[2], i));
+        assert!(p2.is_finite() && p2 > p8 && p8 > 10.0, "{csv}");
+    }
+    // The 3DGS sweep's options are refused with a clear message.
+    let o = run(&[
+        "rd",
+        file.to_str().unwrap(),
+        "--crf",
+        "6",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("--crf") && e.contains("--anchor-step-scale"),
+        "{e}"
+    );
 }

@@ -18,6 +18,7 @@ pub mod quality_search;
 mod refit_stage;
 pub mod scaffold;
 pub mod scaffold_prior;
+pub mod scaffold_recode;
 pub mod sequence;
 mod still;
 mod stream;

@@ -447,3 +447,58 @@ fn requantized_anchors_stay_within_half_a_step() {
     assert_eq!(h.requantized(1.0).unwrap(), h);
     assert!(h.requantized(0.0).is_err());
 }
+
+/// Re-coding a file's `AHAC` with larger steps (`dlgs rd` on Scaffold-GS files) from the
+/// `.dlgs` alone: k = 1 gives the file back byte for byte, k = 2 the file written from the
+/// requantised anchors directly; a file with raw anchors (`ANCR`) is refused with the reason.
+#[test]
+fn recoding_anchor_steps_from_a_file_is_writing_them_requantised() {
+    use dlgs::chunks::tfea::TfeaBody;
+    use dlgs::model::scaffold::AnchorDeformation;
+    use dlgs::model::TimeFeatures;
+    use dlgs_encoder::scaffold::ScaffoldWriter;
+    use dlgs_encoder::scaffold_recode::recode_anchor_steps;
+    let g = gop0();
+    let h = g.hac_anchors().unwrap();
+    let scene = scene_of(&h);
+    let mlps = g.mlps.view_mlps(Some(&g.mlps)).unwrap();
+    let d = AnchorDeformation {
+        bound_min: g.mlps.bounds.0,
+        bound_max: g.mlps.bounds.1,
+        mlps: g.mlps.deform.clone(),
+    };
+    let body = TfeaBody::Exact(TimeFeatures::zeros(h.n_dynamic as usize, 7, 16));
+    let write = |anchors: Option<&HacAnchors>| {
+        let mut w = ScaffoldWriter::new(Vec::new(), scene.clone(), 3).unwrap();
+        match anchors {
+            Some(a) => {
+                w.push_gop_hac(a, &mlps, Some((&d, &body))).unwrap();
+            }
+            None => w
+                .push_gop(&h.canonical(), &mlps, Some((&d, &body)))
+                .unwrap(),
+        }
+        w.finish().unwrap()
+    };
+    let file = write(Some(&h));
+    let recode = |bytes: &[u8], k: f32| {
+        recode_anchor_steps(
+            std::io::Cursor::new(bytes.to_vec()),
+            k,
+            3,
+            Limits::default(),
+        )
+    };
+    let (same, report) = recode(&file, 1.0).unwrap();
+    assert!(same == file, "k = 1 changed the file");
+    assert_eq!(report.ahac_chunks, 1);
+    let (k2, report) = recode(&file, 2.0).unwrap();
+    assert!(k2 == write(Some(&h.requantized(2.0).unwrap())));
+    assert!(report.ahac_bytes_after < report.ahac_bytes_before);
+    let e = recode(&write(None), 2.0).unwrap_err();
+    assert!(
+        matches!(e, Error::Input(_)) && e.to_string().contains("ANCR"),
+        "{e}"
+    );
+    assert!(recode(&file, 0.0).is_err());
+}

@@ -286,6 +286,40 @@ fn a_residual_chain_decodes_the_same_cold_in_order_and_after_seeks() {
     assert_eq!(c, cold);
 }
 
+/// The in-order decoder over a plain `Read` (`dlgs play` from stdin) gives the random-access
+/// decoder's GOPs along a residual chain and the same frames, bit for bit; a stream cut inside
+/// a GOP fails at that GOP with a typed error after the GOPs before it.
+#[test]
+fn the_stream_decoder_gives_the_random_access_gops_and_frames() {
+    use dlgs_decoder::scaffold::ScaffoldStreamDecoder;
+    let bytes = file(true, 4);
+    let mut dec = decoder(bytes.clone());
+    let mut stream =
+        ScaffoldStreamDecoder::new(std::io::Cursor::new(bytes.clone()), dlgs::Limits::default())
+            .unwrap();
+    let req = ViewRequest {
+        camera_center: CAMERAS[1],
+        language: true,
+        visible: None,
+    };
+    for g in 0..4 {
+        let s = stream.next_gop().unwrap().expect("4 GOPs");
+        let r = dec.gop(g).unwrap();
+        assert_eq!(s.index, g);
+        assert_eq!((&s.canonical, &s.mlps), (&r.canonical, &r.mlps), "GOP {g}");
+        assert_eq!(s.frame(3, 0.25, &req), r.frame(3, 0.25, &req), "GOP {g}");
+    }
+    assert!(stream.next_gop().unwrap().is_none());
+    let cut = bytes[..bytes.len() - 1000].to_vec();
+    let mut stream =
+        ScaffoldStreamDecoder::new(std::io::Cursor::new(cut), dlgs::Limits::default()).unwrap();
+    for _ in 0..3 {
+        stream.next_gop().unwrap().expect("the GOPs before the cut");
+    }
+    let e = stream.next_gop().unwrap_err();
+    assert!(e.to_string().contains("runcated"), "{e}");
+}
+
 /// Re-frames chunk `ty`'s payload after `edit` (the CRC made valid again, the length kept).
 fn edit_chunk(bytes: &[u8], ty: &[u8; 4], edit: impl Fn(&mut [u8])) -> Vec<u8> {
     let mut b = bytes.to_vec();

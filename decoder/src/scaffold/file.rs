@@ -7,15 +7,14 @@
 use std::io::{Read, Seek};
 use std::sync::Arc;
 
-use dlgs::chunks::{adef, ahac, amlp, ancr, rntc};
 use dlgs::container::header::Variant;
 use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
 use dlgs::model::scaffold::{AnchorDeformation, Anchors, ScaffoldCanonical, ScaffoldMlps};
 use dlgs::model::TimeFeatures;
 use dlgs::{Error, FormatErrorKind, Limits, Result};
 
+use super::gop_decode::{decode_dynamic, decode_state, GopChunks, GopState};
 use super::{deform_anchors, neural_gaussians, NeuralGaussians, ViewRequest};
-use crate::build::decode_time_features;
 use crate::hevc::{self, SharedKeyPictureDecoder};
 
 /// One decoded Scaffold-GS GOP.
@@ -100,18 +99,63 @@ impl ScaffoldGop {
         r.extend(super::neural::anchor_reach_range(state, ns..state.len()));
         r
     }
+
+    /// The neural Gaussians `view` sees at key pair (`key`, `key + 1`), fraction `delta`.
+    pub fn frame(&self, key: usize, delta: f32, view: &ViewRequest) -> NeuralGaussians {
+        let (positions, state) = self.anchors_at(key, delta);
+        neural_gaussians(positions, &state, &self.mlps, view)
+    }
+
+    /// As [`Self::frame`], decoding only the anchors `in_view(positions, reach)` keeps.
+    /// Returns the frame and the anchors kept.
+    pub fn frame_in_view(
+        &self,
+        key: usize,
+        delta: f32,
+        camera_center: [f32; 3],
+        language: bool,
+        in_view: &InView,
+    ) -> Result<(NeuralGaussians, usize)> {
+        let (positions, state) = self.anchors_at(key, delta);
+        let visible = in_view(&state.positions, &self.reach(&state));
+        if visible.len() != state.len() {
+            return Err(Error::request("the view test must answer once per anchor"));
+        }
+        let kept = visible.iter().filter(|&&v| v).count();
+        let view = ViewRequest {
+            camera_center,
+            language,
+            visible: Some(&visible),
+        };
+        Ok((neural_gaussians(positions, &state, &self.mlps, &view), kept))
+    }
+
+    /// The anchors at key pair (`key`, `key + 1`), fraction `delta`, as stand-in Gaussians
+    /// (position, the larger three log-scalings, unit rotation, zero colour and opacity; with
+    /// `language`, zero language): what stands for a Scaffold-GS scene where only its extent
+    /// matters (bounds, orbit cameras).
+    pub fn stand_ins(&self, key: usize, delta: f32, language: bool) -> dlgs::model::Gaussians {
+        let (_, a) = self.anchors_at(key, delta);
+        let lang = if language { 9 } else { 0 };
+        let mut g = dlgs::model::Gaussians::new(0, lang);
+        for i in 0..a.len() {
+            g.positions.push(a.positions[i]);
+            let s = a.log_scaling(i);
+            g.log_scales.push([s[3], s[4], s[5]]);
+            g.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity.push(0.0);
+            g.sh.extend_from_slice(&[0.0; 3]);
+            if language {
+                g.lang_opacity.push(0.0);
+                g.lang.extend_from_slice(&[0.0; 9]);
+            }
+        }
+        g
+    }
 }
 
 /// A view test: given every anchor's position and reach, which anchors to decode.
 pub type InView<'a> = dyn Fn(&[[f32; 3]], &[f32]) -> Vec<bool> + 'a;
-
-/// What a residual GOP needs of its reference GOP: the decoded canonical anchors and the view
-/// MLPs in force (format-spec §6.10, §6.12).
-#[derive(Debug)]
-struct GopState {
-    canonical: ScaffoldCanonical,
-    mlps: ScaffoldMlps,
-}
 
 /// Decoded GOP states kept for residual chains (GOP 0's preferentially), so sequential
 /// playback decodes each GOP's residual once and a seek walks the chain from the nearest state
@@ -125,10 +169,6 @@ pub struct ScaffoldDecoder<R: Read + Seek> {
     /// Most recently used last.
     states: Vec<(u32, Arc<GopState>)>,
     hevc: Option<SharedKeyPictureDecoder>,
-}
-
-fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
-    chunks.iter().find(|c| c.ty == ty).copied()
 }
 
 impl<R: Read + Seek> ScaffoldDecoder<R> {
@@ -160,23 +200,8 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
     /// extent matters (bounds, orbit cameras); the CLI and the Python reader use the same.
     pub fn anchor_stand_ins(&mut self, t: f64) -> Result<dlgs::model::Gaussians> {
         let tp = self.scene().locate(t)?;
-        let lang = if self.scene().lang_levels > 0 { 9 } else { 0 };
-        let gop = self.gop(tp.gop)?;
-        let (_, a) = gop.anchors_at(tp.key, tp.delta);
-        let mut g = dlgs::model::Gaussians::new(0, lang);
-        for i in 0..a.len() {
-            g.positions.push(a.positions[i]);
-            let s = a.log_scaling(i);
-            g.log_scales.push([s[3], s[4], s[5]]);
-            g.rotations.push([1.0, 0.0, 0.0, 0.0]);
-            g.opacity.push(0.0);
-            g.sh.extend_from_slice(&[0.0; 3]);
-            if lang > 0 {
-                g.lang_opacity.push(0.0);
-                g.lang.extend_from_slice(&[0.0; 9]);
-            }
-        }
-        Ok(g)
+        let language = self.scene().lang_levels > 0;
+        Ok(self.gop(tp.gop)?.stand_ins(tp.key, tp.delta, language))
     }
 
     /// GOP `g`'s canonical anchors (after its residual chain) without its deformation.
@@ -199,22 +224,14 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let limits = self.reader.limits().fresh();
         let at = self.reader.gop_entry(g)?.offset;
         let chunks = self.reader.gop_chunks(g)?;
-        let mut read = |ty: ChunkType| -> Result<(Vec<u8>, u64)> {
-            let c = find(&chunks, ty)
-                .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), at))?;
-            Ok((self.reader.payload(&c)?, c.payload_offset()))
+        let reader = &mut self.reader;
+        let mut read = |c: &ChunkInfo| reader.payload(c);
+        let mut chunks = GopChunks {
+            chunks: &chunks,
+            at,
+            read: &mut read,
         };
-        let dynamic = if scene.n_dynamic > 0 {
-            let (p, o) = read(ChunkType::ADEF)?;
-            let d = adef::decode(&p, o, &limits).map_err(|e| e.in_chunk(ChunkType::ADEF))?;
-            let (p, o) = read(ChunkType::TFEA)?;
-            let f = decode_time_features(&scene, &limits, self.hevc.as_ref(), &p, o)
-                .and_then(|f| f.to_time_features())
-                .map_err(|e| e.in_chunk(ChunkType::TFEA))?;
-            Some((d, f))
-        } else {
-            None
-        };
+        let dynamic = decode_dynamic(&scene, &limits, self.hevc.as_ref(), &mut chunks)?;
         let gop = Arc::new(ScaffoldGop::new(
             g,
             state.canonical.clone(),
@@ -276,73 +293,20 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         let limits = self.reader.limits().fresh();
         let at = self.reader.gop_entry(g)?.offset;
         let chunks = self.reader.gop_chunks(g)?;
-        let mut read = |ty: ChunkType| -> Result<(Vec<u8>, u64)> {
-            let c = find(&chunks, ty)
-                .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), at))?;
-            Ok((self.reader.payload(&c)?, c.payload_offset()))
+        let reader = &mut self.reader;
+        let mut read = |c: &ChunkInfo| reader.payload(c);
+        let mut gop = GopChunks {
+            chunks: &chunks,
+            at,
+            read: &mut read,
         };
-        let Some(reference) = reference else {
-            // Exactly one of ANCR (§6.9) and AHAC (§6.13).
-            let canonical = match (
-                find(&chunks, ChunkType::ANCR),
-                find(&chunks, ChunkType::AHAC),
-            ) {
-                (Some(_), Some(c)) => {
-                    return Err(Error::payload(
-                        ChunkType::AHAC,
-                        "a GOP holds both ANCR and AHAC",
-                        c.payload_offset(),
-                    ))
-                }
-                (None, Some(_)) => {
-                    let (p, o) = read(ChunkType::AHAC)?;
-                    ahac::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AHAC))?
-                }
-                _ => {
-                    let (p, o) = read(ChunkType::ANCR)?;
-                    ancr::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::ANCR))?
-                }
-            };
-            let (p, o) = read(ChunkType::AMLP)?;
-            let mlps =
-                amlp::decode(&p, o, &scene, &limits).map_err(|e| e.in_chunk(ChunkType::AMLP))?;
-            return Ok(GopState { canonical, mlps });
-        };
-        // A residual GOP (§6.12): an RNTC over anchor groups, no canonical chunk.
-        if let Some(c) = find(&chunks, ChunkType::ANCR).or_else(|| find(&chunks, ChunkType::AHAC)) {
-            return Err(Error::format(
-                FormatErrorKind::Order("a residual Scaffold-GS GOP holds RNTC, not ANCR or AHAC"),
-                c.offset,
-            ));
-        }
-        let (p, o) = read(ChunkType::RNTC)?;
-        let canonical = rntc::decode(&p, o, &scene, &limits)
-            .and_then(|field| {
-                reference
-                    .canonical
-                    .with_residual(&field)
-                    .map_err(|e| Error::payload(ChunkType::RNTC, e, o))
-            })
-            .map_err(|e| e.in_chunk(ChunkType::RNTC))?;
-        let mlps = match find(&chunks, ChunkType::AMLP) {
-            None => reference.mlps.clone(),
-            Some(_) => {
-                let (p, o) = read(ChunkType::AMLP)?;
-                amlp::decode_any(&p, o, &scene, &limits)
-                    .map_err(|e| e.in_chunk(ChunkType::AMLP))?
-                    .resolve(Some(&reference.mlps))
-                    .expect("a reference is given")
-            }
-        };
-        Ok(GopState { canonical, mlps })
+        decode_state(&scene, &limits, &mut gop, reference)
     }
 
     /// The neural Gaussians `view` sees at time `t` seconds (between frames too).
     pub fn frame_at(&mut self, t: f64, view: &ViewRequest) -> Result<NeuralGaussians> {
         let tp = self.scene().locate(t)?;
-        let gop = self.gop(tp.gop)?;
-        let (positions, state) = gop.anchors_at(tp.key, tp.delta);
-        Ok(neural_gaussians(positions, &state, &gop.mlps, view))
+        Ok(self.gop(tp.gop)?.frame(tp.key, tp.delta, view))
     }
 
     /// As [`Self::frame_at`], decoding only the anchors `in_view(positions, reach)` keeps: it
@@ -356,18 +320,7 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         in_view: &InView,
     ) -> Result<(NeuralGaussians, usize)> {
         let tp = self.scene().locate(t)?;
-        let gop = self.gop(tp.gop)?;
-        let (positions, state) = gop.anchors_at(tp.key, tp.delta);
-        let visible = in_view(&state.positions, &gop.reach(&state));
-        if visible.len() != state.len() {
-            return Err(Error::request("the view test must answer once per anchor"));
-        }
-        let kept = visible.iter().filter(|&&v| v).count();
-        let view = ViewRequest {
-            camera_center,
-            language,
-            visible: Some(&visible),
-        };
-        Ok((neural_gaussians(positions, &state, &gop.mlps, &view), kept))
+        self.gop(tp.gop)?
+            .frame_in_view(tp.key, tp.delta, camera_center, language, in_view)
     }
 }

@@ -4,10 +4,13 @@
 
 mod anchor_deform;
 mod file;
+mod gop_decode;
 mod mlp;
 mod neural;
+mod stream;
 
 pub use anchor_deform::deform_anchors;
 pub use file::{InView, ScaffoldDecoder, ScaffoldGop};
 pub use mlp::{activate, eval as eval_mlp};
 pub use neural::{anchor_reach, neural_gaussians, NeuralGaussians, ViewRequest};
+pub use stream::ScaffoldStreamDecoder;

@@ -1,0 +1,103 @@
+//! Re-coding a Scaffold-GS file's HAC-coded anchors (`AHAC`, format-spec §6.13) with larger
+//! steps, from the `.dlgs` alone: every `AHAC` chunk is decoded to its integers and context
+//! model, requantised (`HacAnchors::requantized`, steps `k` times the file's) and coded again;
+//! every other chunk is copied byte for byte. Residual GOPs (`RNTC`) then apply to the
+//! requantised anchors, exactly as in a file written from the HAC run with
+//! `--anchor-step-scale k` (the same `AHAC` bytes when the file was written with k = 1).
+
+use std::io::{Read, Seek};
+
+use dlgs::chunks::ahac;
+use dlgs::container::header::Variant;
+use dlgs::container::{ChunkType, FileReader, Writer};
+use dlgs::{Error, Limits, Result};
+
+/// What [`recode_anchor_steps`] changed.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RecodeReport {
+    /// `AHAC` chunks re-coded (one per intra GOP).
+    pub ahac_chunks: usize,
+    /// Their payload bytes before and after.
+    pub ahac_bytes_before: u64,
+    pub ahac_bytes_after: u64,
+}
+
+/// `META` with `settings.anchor_step_scale` multiplied by `k` (the steps are now `k` times
+/// the file's); anything that is not a JSON object is kept as it is.
+fn scaled_meta(payload: &[u8], k: f32) -> Vec<u8> {
+    let Ok(serde_json::Value::Object(mut meta)) = serde_json::from_slice(payload) else {
+        return payload.to_vec();
+    };
+    let settings = meta
+        .entry("settings")
+        .or_insert_with(|| serde_json::json!({}));
+    if let Some(s) = settings.as_object_mut() {
+        let old = s
+            .get("anchor_step_scale")
+            .and_then(|v| v.as_f64())
+            .unwrap_or(1.0);
+        s.insert(
+            "anchor_step_scale".into(),
+            serde_json::json!(old * f64::from(k)),
+        );
+    }
+    serde_json::to_vec(&meta).unwrap_or_else(|_| payload.to_vec())
+}
+
+/// The Scaffold-GS file read from `src` with every `AHAC` chunk's steps `k` times larger
+/// (`k = 1`: the same anchors, re-coded). Fails on a file of the 3DGS variant or one without
+/// `AHAC` chunks (raw `ANCR` anchors hold no steps to scale). Scene-level chunks the reader
+/// does not know are not copied.
+pub fn recode_anchor_steps<R: Read + Seek>(
+    src: R,
+    k: f32,
+    zstd_level: i32,
+    limits: Limits,
+) -> Result<(Vec<u8>, RecodeReport)> {
+    if !(k.is_finite() && k > 0.0) {
+        return Err(Error::input(format!(
+            "anchor step scale {k}: a finite number > 0"
+        )));
+    }
+    let mut r = FileReader::open_with_limits(src, limits.clone())?;
+    let scene = r.scene().clone();
+    if scene.variant != Variant::Scaffold {
+        return Err(Error::input(
+            "re-coding anchor steps needs a Scaffold-GS file (HEAD.variant 1); this one is 3DGS",
+        ));
+    }
+    let mut w = Writer::new(Vec::new(), scene.clone())?;
+    for c in r.scene_chunks().to_vec() {
+        let p = r.payload(&c)?;
+        let p = if c.ty == ChunkType::META {
+            scaled_meta(&p, k)
+        } else {
+            p
+        };
+        w.scene_chunk(c.ty, c.flags, &p)?;
+    }
+    let mut report = RecodeReport::default();
+    for g in 0..scene.gop_count {
+        w.begin_gop()?;
+        for c in r.gop_chunks(g)? {
+            let p = r.payload(&c)?;
+            if c.ty != ChunkType::AHAC {
+                w.gop_chunk(c.ty, c.flags, &p)?;
+                continue;
+            }
+            let (h, _) = ahac::decode_full(&p, c.payload_offset(), &scene, &limits)?;
+            let (coded, _) = ahac::encode(&h.requantized(k)?, &scene, zstd_level)?;
+            report.ahac_chunks += 1;
+            report.ahac_bytes_before += p.len() as u64;
+            report.ahac_bytes_after += coded.len() as u64;
+            w.gop_chunk(c.ty, c.flags, &coded)?;
+        }
+    }
+    if report.ahac_chunks == 0 {
+        return Err(Error::input(
+            "the file's anchors are not HAC-coded (no AHAC chunk: raw ANCR anchors have no steps \
+             to scale); write it from the HAC run without --raw-anchors",
+        ));
+    }
+    Ok((w.finish()?, report))
+}
