@@ -237,7 +237,9 @@ pub struct CodecArgs {
     )]
     pub raw_anchors: bool,
     /// Reference HAC runs, near-lossless: `AHAC` steps this many times the reference's, the
-    /// anchors' integers requantised (1 = lossless in symbols).
+    /// anchors' integers requantised (1 = lossless in symbols). Re-encoding a Scaffold-GS
+    /// `.dlgs`: its `AHAC` steps times this, and raw `ANCR` anchors HAC-coded with a
+    /// per-channel prior at this times its default steps (0.01, 0.001, 0.002).
     #[arg(
         help_heading = "Dynamic streams: time features, decoders and residuals",
         long,

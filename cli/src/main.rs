@@ -15,6 +15,7 @@ mod rd_cmd;
 mod rd_plot;
 mod rd_scaffold;
 mod residual_args;
+mod scaffold_recode_cmd;
 mod scene_io;
 mod seek_cmd;
 mod sequence_cmd;
@@ -293,7 +294,11 @@ fn main() -> Result<()> {
             } else if input.iter().all(|p| p.is_dir()) {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)
             } else if let [one] = input.as_slice() {
-                encode_cmd::run_encode(one, &output, &codec, residual_mode.as_deref())
+                if scene_io::is_dlgs(one) && scene_io::is_scaffold(one)? {
+                    scaffold_recode_cmd::run(one, &output, codec.anchor_step_scale)
+                } else {
+                    encode_cmd::run_encode(one, &output, &codec, residual_mode.as_deref())
+                }
             } else {
                 anyhow::bail!(
                     "several inputs must be all splat frame files (a sequence) or all reference \

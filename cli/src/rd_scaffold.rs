@@ -1,6 +1,7 @@
 //! `dlgs rd` of a Scaffold-GS file: sweeps the near-lossless anchor steps (`--anchor-step-scale`)
 //! by re-coding the file's own HAC-coded anchors (`dlgs_encoder::scaffold_recode`; no HAC run
-//! folder needed), and measures each file as `dlgs rd` does for 3DGS: bytes, bytes per frame,
+//! folder needed; raw `ANCR` anchors are coded with the per-channel prior at k times its
+//! default steps), and measures each file as `dlgs rd` does for 3DGS: bytes, bytes per frame,
 //! decode time per frame (frame f for camera f mod the cameras, culled, GOPs included), colour
 //! PSNR / SSIM and, with a language MLP, language PSNR of renders against the file itself.
 

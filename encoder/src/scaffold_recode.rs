@@ -4,19 +4,25 @@
 //! every other chunk is copied byte for byte. Residual GOPs (`RNTC`) then apply to the
 //! requantised anchors, exactly as in a file written from the HAC run with
 //! `--anchor-step-scale k` (the same `AHAC` bytes when the file was written with k = 1).
+//! Raw anchors (`ANCR`) have no context model: they are HAC-coded with the per-channel prior
+//! of [`crate::scaffold_prior`] at `k` times [`DEFAULT_PRIOR_STEPS`].
 
 use std::io::{Read, Seek};
 
-use dlgs::chunks::ahac;
+use dlgs::chunks::{ahac, ancr};
 use dlgs::container::header::Variant;
 use dlgs::container::{ChunkType, FileReader, Writer};
 use dlgs::{Error, Limits, Result};
+
+use crate::scaffold_prior::{prior_anchors, DEFAULT_PRIOR_STEPS};
 
 /// What [`recode_anchor_steps`] changed.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RecodeReport {
     /// `AHAC` chunks re-coded (one per intra GOP).
     pub ahac_chunks: usize,
+    /// Of those, raw `ANCR` chunks coded with the prior model.
+    pub from_raw: usize,
     /// Their payload bytes before and after.
     pub ahac_bytes_before: u64,
     pub ahac_bytes_after: u64,
@@ -45,9 +51,9 @@ fn scaled_meta(payload: &[u8], k: f32) -> Vec<u8> {
 }
 
 /// The Scaffold-GS file read from `src` with every `AHAC` chunk's steps `k` times larger
-/// (`k = 1`: the same anchors, re-coded). Fails on a file of the 3DGS variant or one without
-/// `AHAC` chunks (raw `ANCR` anchors hold no steps to scale). Scene-level chunks the reader
-/// does not know are not copied.
+/// (`k = 1`: the same anchors, re-coded), and every raw `ANCR` chunk HAC-coded with the
+/// prior model at `k` times its default steps. Fails on a file of the 3DGS variant. Scene-level
+/// chunks the reader does not know are not copied.
 pub fn recode_anchor_steps<R: Read + Seek>(
     src: R,
     k: f32,
@@ -81,23 +87,27 @@ pub fn recode_anchor_steps<R: Read + Seek>(
         w.begin_gop()?;
         for c in r.gop_chunks(g)? {
             let p = r.payload(&c)?;
-            if c.ty != ChunkType::AHAC {
-                w.gop_chunk(c.ty, c.flags, &p)?;
-                continue;
-            }
-            let (h, _) = ahac::decode_full(&p, c.payload_offset(), &scene, &limits)?;
-            let (coded, _) = ahac::encode(&h.requantized(k)?, &scene, zstd_level)?;
+            let hac = match c.ty {
+                ChunkType::AHAC => {
+                    let (h, _) = ahac::decode_full(&p, c.payload_offset(), &scene, &limits)?;
+                    h.requantized(k)?
+                }
+                ChunkType::ANCR => {
+                    let anchors = ancr::decode(&p, c.payload_offset(), &scene, &limits)?;
+                    report.from_raw += 1;
+                    prior_anchors(&anchors, DEFAULT_PRIOR_STEPS.map(|q| q * k))?
+                }
+                _ => {
+                    w.gop_chunk(c.ty, c.flags, &p)?;
+                    continue;
+                }
+            };
+            let (coded, _) = ahac::encode(&hac, &scene, zstd_level)?;
             report.ahac_chunks += 1;
             report.ahac_bytes_before += p.len() as u64;
             report.ahac_bytes_after += coded.len() as u64;
-            w.gop_chunk(c.ty, c.flags, &coded)?;
+            w.gop_chunk(ChunkType::AHAC, c.flags, &coded)?;
         }
-    }
-    if report.ahac_chunks == 0 {
-        return Err(Error::input(
-            "the file's anchors are not HAC-coded (no AHAC chunk: raw ANCR anchors have no steps \
-             to scale); write it from the HAC run without --raw-anchors",
-        ));
     }
     Ok((w.finish()?, report))
 }
