@@ -83,6 +83,12 @@ impl<R: Read> StreamDecoder<R> {
             key_preparation: KeyPreparation::All,
             hevc: crate::hevc::default_decoder(),
         };
+        if d.scene().variant == dlgs::container::header::Variant::Scaffold {
+            return Err(Error::request(
+                "a Scaffold-GS stream: its frames depend on the camera; decode it with \
+                 dlgs_decoder::scaffold::ScaffoldStreamDecoder",
+            ));
+        }
         d.read_until_next_gop(false)?;
         Ok(d)
     }

@@ -175,3 +175,34 @@ fn a_damaged_gop_reaches_the_player_as_an_error() {
     assert!(matches!(err, dlgs::Error::Format(_)), "{err}");
     assert!(stream.next_gop().unwrap().is_none());
 }
+
+/// Scaffold-GS streams go through the same pipeline (`ScaffoldStreamDecoder` as its
+/// `GopSource`), with the stream decoder's GOPs; the 3DGS stream decoder refuses them.
+#[test]
+fn the_pipeline_plays_scaffold_streams_and_the_3dgs_decoder_refuses_them() {
+    use dlgs_decoder::scaffold::{ScaffoldStreamDecoder, ViewRequest};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../format-spec/vectors/valid/scaffold-tiny-residual.dlgs");
+    let bytes = std::fs::read(path).unwrap();
+    let err = dlgs_decoder::stream::StreamDecoder::new(&bytes[..])
+        .err()
+        .expect("a Scaffold-GS stream");
+    assert!(matches!(err, dlgs::Error::Request(_)), "{err}");
+    let view = ViewRequest {
+        camera_center: [0.0, 0.0, 4.0],
+        language: true,
+        visible: None,
+    };
+    let mut plain = ScaffoldStreamDecoder::new(&bytes[..], Limits::default()).unwrap();
+    let dec = ScaffoldStreamDecoder::new(Cursor::new(bytes.clone()), Limits::default()).unwrap();
+    let mut stream = PlaybackStream::spawn(dec, PipelineOptions::default()).unwrap();
+    let mut n = 0;
+    while let Some(ready) = stream.next_gop().unwrap() {
+        let want = plain.next_gop().unwrap().expect("as many GOPs");
+        assert_eq!(ready.gop.index, want.index);
+        let (a, b) = (ready.gop.frame(1, 0.25, &view), want.frame(1, 0.25, &view));
+        assert_eq!(format!("{a:?}"), format!("{b:?}"), "GOP {n}");
+        n += 1;
+    }
+    assert!(n >= 2 && plain.next_gop().unwrap().is_none());
+}
