@@ -41,6 +41,7 @@ pub fn rasterize(
     lang: Option<(&[f32], usize)>,
 ) -> Accum {
     let tiles_x = width.div_ceil(TILE) as usize;
+    let tiles_y = height.div_ceil(TILE) as usize;
     let tile_lists = bin_tiles(splats, width, height);
     let lw = lang.map_or(0, |(_, w)| w);
     let pairs = tile_lists.iter().map(Vec::len).sum();
@@ -61,34 +62,48 @@ pub fn rasterize(
         })
         .collect();
     let n = (width * height) as usize;
-    let mut acc = Accum {
-        width,
-        height,
-        color: vec![0.0; n * 3],
-        transmittance: vec![0.0; n],
-        features: lang.map(|_| vec![0.0; n * lw]),
-        lang_width: lw,
-        pairs: 0,
+    let mut color = vec![0.0; n * 3];
+    let mut transmittance = vec![0.0; n];
+    let mut features = lang.map(|_| vec![0.0; n * lw]);
+    // Copy the tiles out one tile row (16 image rows) at a time, rows in parallel.
+    let band = (width * TILE) as usize;
+    let feat_bands: Vec<Option<&mut [f32]>> = match &mut features {
+        Some(f) if lw > 0 => f.chunks_mut(band * lw).map(Some).collect(),
+        _ => (0..tiles_y).map(|_| None).collect(),
     };
-    acc.pairs = pairs;
-    for (i, t) in outs.into_iter().enumerate() {
-        let (x0, y0) = ((i % tiles_x) as u32 * TILE, (i / tiles_x) as u32 * TILE);
-        for ly in 0..t.h {
-            for lx in 0..t.w {
-                let l = (ly * TILE + lx) as usize;
-                let p = ((y0 + ly) * width + x0 + lx) as usize;
-                let tr = t.t[l];
-                for c in 0..3 {
-                    acc.color[p * 3 + c] = t.c[l * 3 + c] + tr * background[c];
-                }
-                acc.transmittance[p] = tr;
-                if let Some(f) = &mut acc.features {
-                    f[p * lw..(p + 1) * lw].copy_from_slice(&t.f[l * lw..(l + 1) * lw]);
+    color
+        .par_chunks_mut(band * 3)
+        .zip(transmittance.par_chunks_mut(band))
+        .zip(feat_bands.into_par_iter())
+        .zip(outs.par_chunks(tiles_x))
+        .for_each(|(((col, trs), mut fb), row)| {
+            for (tx, t) in row.iter().enumerate() {
+                let x0 = tx as u32 * TILE;
+                for ly in 0..t.h {
+                    for lx in 0..t.w {
+                        let l = (ly * TILE + lx) as usize;
+                        let p = (ly * width + x0 + lx) as usize;
+                        let tr = t.t[l];
+                        for c in 0..3 {
+                            col[p * 3 + c] = t.c[l * 3 + c] + tr * background[c];
+                        }
+                        trs[p] = tr;
+                        if let Some(f) = &mut fb {
+                            f[p * lw..(p + 1) * lw].copy_from_slice(&t.f[l * lw..(l + 1) * lw]);
+                        }
+                    }
                 }
             }
-        }
+        });
+    Accum {
+        width,
+        height,
+        color,
+        transmittance,
+        features,
+        lang_width: lw,
+        pairs,
     }
-    acc
 }
 
 /// Pixel rectangle `(x0, y0, w, h)` of tile `i` (row-major, [`bin_tiles`]'s order) of a
@@ -184,6 +199,65 @@ fn band_tiles(s: &Splat2d, ty: u32) -> (usize, usize) {
     let a = (lo.max(t0 as f32) as usize).min(t1);
     let b = (hi.max(0.0) as usize).clamp(a, t1);
     (a, b)
+}
+
+/// Splats gathered per step of [`composite`].
+const CHUNK: usize = 16;
+
+/// Composite one splat over the tile at (x0, y0), size w x h; returns the pixels it finished.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn splat_on_tile<const LANG: bool>(
+    acc: &mut TileAcc,
+    row_left: &mut [f32; L],
+    s: &Splat2d,
+    x0: u32,
+    y0: u32,
+    w: u32,
+    h: u32,
+    lang: Option<(&[f32], usize)>,
+) -> f32 {
+    let xa0 = ((s.px[0] as u32).max(x0) - x0) as f32;
+    let xb0 = ((s.px[2] as u32).min(x0 + w) - x0) as f32;
+    let ya = (s.px[1] as u32).max(y0) - y0;
+    let yb = (s.px[3] as u32).min(y0 + h) - y0;
+    let [ca, cbk, cc] = s.conic;
+    let cx = s.mean[0] - x0 as f32;
+    let feat = match lang {
+        Some((all, lw)) if LANG => &all[s.index as usize * lw..(s.index as usize + 1) * lw],
+        _ => &[][..],
+    };
+    let mut finished = 0.0;
+    for ly in ya..yb {
+        let r = ly as usize;
+        if row_left[r] <= 0.0 {
+            continue;
+        }
+        let dy = (y0 + ly) as f32 - s.mean[1];
+        // Exact span of this row inside the ellipse A dx^2 + 2B dx dy + C dy^2 <= r2, widened by
+        // one pixel against rounding; outside it alpha < 1/255 so nothing would be added.
+        let disc = cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2);
+        if !(disc >= 0.0) {
+            continue;
+        }
+        let sq = disc.sqrt();
+        let xa = ((cx + (-cbk * dy - sq) / ca).floor() - 1.0).max(xa0);
+        let xb = ((cx + (-cbk * dy + sq) / ca).ceil() + 2.0).min(xb0);
+        if !(xa < xb) {
+            continue;
+        }
+        // Most splats are a few pixels wide: touch only the half-row they cover.
+        let done = if xb <= 8.0 {
+            row_span::<8, 0, LANG>(acc, r, s, cx, dy, xa, xb, feat)
+        } else if xa >= 8.0 {
+            row_span::<8, 8, LANG>(acc, r, s, cx, dy, xa, xb, feat)
+        } else {
+            row_span::<16, 0, LANG>(acc, r, s, cx, dy, xa, xb, feat)
+        };
+        row_left[r] -= done;
+        finished += done;
+    }
+    finished
 }
 
 struct TileOut {
@@ -307,44 +381,24 @@ fn composite<const LANG: bool>(
         row[..w as usize].fill(1.0);
     }
     let mut remaining = (w * h) as f32;
-    for &k in list {
+    // Pixels of each tile row still accumulating: a finished row is skipped.
+    let mut row_left = [0.0f32; L];
+    row_left[..h as usize].fill(w as f32);
+    // The splats are gathered a chunk at a time first: independent loads, so their cache misses
+    // overlap instead of stalling one splat after the other.
+    let mut buf = [Splat2d::default(); CHUNK];
+    for ids in list.chunks(CHUNK) {
         if remaining <= 0.0 {
             break;
         }
-        let s = &splats[k as usize];
-        let xa0 = ((s.px[0] as u32).max(x0) - x0) as f32;
-        let xb0 = ((s.px[2] as u32).min(x0 + w) - x0) as f32;
-        let ya = (s.px[1] as u32).max(y0) - y0;
-        let yb = (s.px[3] as u32).min(y0 + h) - y0;
-        let [ca, cbk, cc] = s.conic;
-        let cx = s.mean[0] - x0 as f32;
-        let feat = match lang {
-            Some((all, lw)) if LANG => &all[s.index as usize * lw..(s.index as usize + 1) * lw],
-            _ => &[][..],
-        };
-        for ly in ya..yb {
-            let dy = (y0 + ly) as f32 - s.mean[1];
-            // Exact span of this row inside the ellipse A dx^2 + 2B dx dy + C dy^2 <= r2, widened by
-            // one pixel against rounding; outside it alpha < 1/255 so nothing would be added.
-            let disc = cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2);
-            if !(disc >= 0.0) {
-                continue;
+        for (b, &k) in buf.iter_mut().zip(ids) {
+            *b = splats[k as usize];
+        }
+        for s in &buf[..ids.len()] {
+            if remaining <= 0.0 {
+                break;
             }
-            let sq = disc.sqrt();
-            let xa = ((cx + (-cbk * dy - sq) / ca).floor() - 1.0).max(xa0);
-            let xb = ((cx + (-cbk * dy + sq) / ca).ceil() + 2.0).min(xb0);
-            if !(xa < xb) {
-                continue;
-            }
-            let r = ly as usize;
-            // Most splats are a few pixels wide: touch only the half-row they cover.
-            remaining -= if xb <= 8.0 {
-                row_span::<8, 0, LANG>(&mut acc, r, s, cx, dy, xa, xb, feat)
-            } else if xa >= 8.0 {
-                row_span::<8, 8, LANG>(&mut acc, r, s, cx, dy, xa, xb, feat)
-            } else {
-                row_span::<16, 0, LANG>(&mut acc, r, s, cx, dy, xa, xb, feat)
-            };
+            remaining -= splat_on_tile::<LANG>(&mut acc, &mut row_left, s, x0, y0, w, h, lang);
         }
     }
     let mut c = vec![0.0f32; TP * 3];
