@@ -204,19 +204,18 @@ fn band_tiles(s: &Splat2d, ty: u32) -> (usize, usize) {
 /// Splats gathered per step of [`composite`].
 const CHUNK: usize = 16;
 
-/// Composite one splat over the tile at (x0, y0), size w x h; returns the pixels it finished.
+/// Composite one splat over the tile at (x0, y0), size w x h.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn splat_on_tile<const LANG: bool>(
     acc: &mut TileAcc,
-    row_left: &mut [f32; L],
     s: &Splat2d,
     x0: u32,
     y0: u32,
     w: u32,
     h: u32,
     lang: Option<(&[f32], usize)>,
-) -> f32 {
+) {
     let xa0 = ((s.px[0] as u32).max(x0) - x0) as f32;
     let xb0 = ((s.px[2] as u32).min(x0 + w) - x0) as f32;
     let ya = (s.px[1] as u32).max(y0) - y0;
@@ -227,10 +226,27 @@ fn splat_on_tile<const LANG: bool>(
         Some((all, lw)) if LANG => &all[s.index as usize * lw..(s.index as usize + 1) * lw],
         _ => &[][..],
     };
-    let mut finished = 0.0;
+    // A splat whose box covers only one half of the tile's rows (most splats are a few pixels
+    // wide) needs no per-row span: outside the ellipse its alpha is below 1/255 anyway.
+    if xb0 <= 8.0 || xa0 >= 8.0 {
+        for ly in ya..yb {
+            let r = ly as usize;
+            if !acc.row_live[r] {
+                continue;
+            }
+            let dy = (y0 + ly) as f32 - s.mean[1];
+            if xb0 <= 8.0 {
+                row_span::<8, 0, LANG>(acc, r, s, cx, dy, xa0, xb0, feat)
+            } else {
+                row_span::<8, 8, LANG>(acc, r, s, cx, dy, xa0, xb0, feat)
+            }
+            acc.update_row(r);
+        }
+        return;
+    }
     for ly in ya..yb {
         let r = ly as usize;
-        if row_left[r] <= 0.0 {
+        if !acc.row_live[r] {
             continue;
         }
         let dy = (y0 + ly) as f32 - s.mean[1];
@@ -247,17 +263,15 @@ fn splat_on_tile<const LANG: bool>(
             continue;
         }
         // Most splats are a few pixels wide: touch only the half-row they cover.
-        let done = if xb <= 8.0 {
+        if xb <= 8.0 {
             row_span::<8, 0, LANG>(acc, r, s, cx, dy, xa, xb, feat)
         } else if xa >= 8.0 {
             row_span::<8, 8, LANG>(acc, r, s, cx, dy, xa, xb, feat)
         } else {
             row_span::<16, 0, LANG>(acc, r, s, cx, dy, xa, xb, feat)
-        };
-        row_left[r] -= done;
-        finished += done;
+        }
+        acc.update_row(r);
     }
-    finished
 }
 
 struct TileOut {
@@ -277,15 +291,29 @@ struct TileAcc {
     /// 1.0 while a pixel still accumulates, 0.0 once its colour transmittance terminated.
     live: [[f32; L]; L],
     tl: [[f32; L]; L],
+    /// Whether a tile row still has a live pixel, and how many rows do.
+    row_live: [bool; L],
+    rows_live: u32,
     /// Language features, channel-planar: `f[c][row][lane]`.
     f: Vec<[[f32; L]; L]>,
 }
 
 const L: usize = TILE as usize;
 
+impl TileAcc {
+    /// After row `r` was drawn: mark it finished once none of its pixels is live. An OR of the
+    /// bits (live is 0.0 or 1.0) rather than a sum, so it vectorises and carries no long chain.
+    #[inline(always)]
+    fn update_row(&mut self, r: usize) {
+        if self.live[r].iter().fold(0u32, |m, v| m | v.to_bits()) == 0 {
+            self.row_live[r] = false;
+            self.rows_live -= 1;
+        }
+    }
+}
+
 /// One Gaussian on one tile row, lanes `[B, B + N)` of the row (N = 8 or 16): the per-pixel
-/// rule of the module comment, written branch-free so it vectorises. Returns the number of
-/// pixels that finished.
+/// rule of the module comment, written branch-free so it vectorises.
 #[inline(always)]
 fn row_span<const N: usize, const B: usize, const LANG: bool>(
     acc: &mut TileAcc,
@@ -296,14 +324,13 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
     xa: f32,
     xb: f32,
     feat: &[f32],
-) -> f32 {
+) {
     let [ca, cbk, cc] = s.conic;
     let (o, ol) = (s.opacity, s.lang_opacity);
     let [sr, sg, sb] = s.color;
     // power = -0.5 A dx^2 + p1 dx + p0 with the dy terms hoisted out of the lane loop.
     let p0 = -0.5 * cc * dy * dy;
     let p1 = -cbk * dy;
-    let mut terminated = [0.0f32; N];
     let mut wl = [0.0f32; N];
     {
         let tr = &mut acc.t[r][B..B + N];
@@ -329,7 +356,6 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
             rb[j] += sb * wgt;
             tr[j] += add * (test_t - tr[j]);
             lv[j] -= term;
-            terminated[j] = term;
             if LANG {
                 let al = (ol * g).min(ALPHA_MAX);
                 // Language stops where the colour stopped (live after this Gaussian's update).
@@ -351,7 +377,6 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
             }
         }
     }
-    terminated.iter().sum()
 }
 
 /// Composite one tile at pixel origin (x0, y0), size w x h. Compiled for AVX2+FMA and for
@@ -375,30 +400,29 @@ fn composite<const LANG: bool>(
         cb: [[0.0; L]; L],
         live: [[0.0; L]; L],
         tl: [[1.0; L]; L],
+        row_live: [false; L],
+        rows_live: h,
         f: vec![[[0.0; L]; L]; if LANG { lw } else { 0 }],
     };
-    for row in acc.live.iter_mut().take(h as usize) {
+    for (row, flag) in acc.live.iter_mut().zip(&mut acc.row_live).take(h as usize) {
         row[..w as usize].fill(1.0);
+        *flag = true;
     }
-    let mut remaining = (w * h) as f32;
-    // Pixels of each tile row still accumulating: a finished row is skipped.
-    let mut row_left = [0.0f32; L];
-    row_left[..h as usize].fill(w as f32);
     // The splats are gathered a chunk at a time first: independent loads, so their cache misses
     // overlap instead of stalling one splat after the other.
     let mut buf = [Splat2d::default(); CHUNK];
     for ids in list.chunks(CHUNK) {
-        if remaining <= 0.0 {
+        if acc.rows_live == 0 {
             break;
         }
         for (b, &k) in buf.iter_mut().zip(ids) {
             *b = splats[k as usize];
         }
         for s in &buf[..ids.len()] {
-            if remaining <= 0.0 {
+            if acc.rows_live == 0 {
                 break;
             }
-            remaining -= splat_on_tile::<LANG>(&mut acc, &mut row_left, s, x0, y0, w, h, lang);
+            splat_on_tile::<LANG>(&mut acc, s, x0, y0, w, h, lang);
         }
     }
     let mut c = vec![0.0f32; TP * 3];
