@@ -369,7 +369,9 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
             }
         }
     }
-    if LANG {
+    // Rows where the language alpha stays below 1/255 (or the colour finished) add nothing:
+    // an OR of the weights' bits (all >= +0.0) skips their nine channel updates.
+    if LANG && wl.iter().fold(0u32, |m, v| m | v.to_bits()) != 0 {
         for (c, fc) in feat.iter().enumerate() {
             let dst = &mut acc.f[c][r][B..B + N];
             for j in 0..N {
