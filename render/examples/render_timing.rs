@@ -5,14 +5,16 @@
 use dlgs_render::{orbit_cameras, render, Image, OrbitSpec, RenderOptions};
 use dlgs_testkit::bench_scenes::{big, plant, with_language};
 
+/// Loads one bench scene.
+type Loader = fn() -> dlgs::Gaussians;
+
 fn main() {
     // Optional filters: `render_timing [SCENE [WHAT [THREADS [RUNS]]]]`, e.g. `273k colour 2 20`
     // (SCENE: part of the name; WHAT: `colour` or `colour+language`).
     let args: Vec<String> = std::env::args().skip(1).collect();
     let arg = |i: usize| args.get(i).map(String::as_str).unwrap_or("");
     let runs: usize = arg(3).parse().unwrap_or(5);
-    let scenes: [(&str, fn() -> dlgs::Gaussians); 2] =
-        [("plant_114k", plant), ("sidebyside_273k", big)];
+    let scenes: [(&str, Loader); 2] = [("plant_114k", plant), ("sidebyside_273k", big)];
     for (name, load) in scenes {
         if !name.contains(arg(0)) {
             continue;
