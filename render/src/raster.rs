@@ -126,25 +126,37 @@ pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
         .map(|(k, s)| ((s.depth.to_bits() as u64) << 32) | k as u64)
         .collect();
     order.par_sort_unstable();
-    // Tile rows -> splats touching that row, in depth order.
-    let mut rows: Vec<Vec<u32>> = vec![Vec::new(); tiles_y];
-    for key in &order {
-        let k = (*key & 0xffff_ffff) as u32;
-        let t = splats[k as usize].tiles;
-        for row in &mut rows[t[1] as usize..t[3] as usize] {
-            row.push(k);
-        }
-    }
-    // Tile lists, built per tile row in parallel, then every tile composited in parallel
-    // (finer than rows, so a few heavy rows do not leave a core idle).
-    rows.par_iter()
-        .enumerate()
-        .flat_map_iter(|(ty, row)| {
+    // Per chunk of the depth order, in parallel: per tile row, the splats whose ellipse reaches
+    // it and the tiles [a, b) of that row it reaches. Each splat is read once, here.
+    let parts: Vec<Vec<Vec<(u32, u16, u16)>>> = order
+        .par_chunks(8192)
+        .map(|chunk| {
+            let mut rows: Vec<Vec<(u32, u16, u16)>> = vec![Vec::new(); tiles_y];
+            for key in chunk {
+                let k = (*key & 0xffff_ffff) as u32;
+                let s = &splats[k as usize];
+                for ty in s.tiles[1]..s.tiles[3] {
+                    let (a, b) = band_tiles(s, ty as u32);
+                    if a < b {
+                        rows[ty as usize].push((k, a as u16, b as u16));
+                    }
+                }
+            }
+            rows
+        })
+        .collect();
+    // Tile lists, built per tile row in parallel from the chunks in order (so in depth order),
+    // then every tile composited in parallel (finer than rows, so a few heavy rows do not
+    // leave a core idle).
+    (0..tiles_y)
+        .into_par_iter()
+        .flat_map_iter(|ty| {
             let mut lists: Vec<Vec<u32>> = vec![Vec::new(); tiles_x];
-            for &k in row {
-                let (a, b) = band_tiles(&splats[k as usize], ty as u32);
-                for list in &mut lists[a..b] {
-                    list.push(k);
+            for part in &parts {
+                for &(k, a, b) in &part[ty] {
+                    for list in &mut lists[a as usize..b as usize] {
+                        list.push(k);
+                    }
                 }
             }
             lists
