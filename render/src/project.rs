@@ -17,7 +17,7 @@ pub const DILATION: f32 = 0.3;
 pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 
 /// A Gaussian projected to the image.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct Splat2d {
     pub mean: [f32; 2],
     /// (a, b, c): power = -0.5 (a dx^2 + c dy^2) - b dx dy.
