@@ -611,8 +611,8 @@ pub fn decode(
     decode_walk(r, n, width, bits, prev, prev2, true)
 }
 
-/// [`decode`] through the walk both directions share, also for modes 5 and 6 (the reference
-/// of the decoder's own walk of those modes).
+/// [`decode`] through the walk both directions share in every mode (the reference of
+/// [`tree_walks`]).
 #[cfg(test)]
 pub(super) fn decode_with_shared_walk(
     r: ByteReader,
@@ -652,23 +652,15 @@ fn decode_walk(
     let dec = open_stream(&mut r, "adaptive")?;
     let mut q = vec![0u16; n];
     // Modes 3-6 through the decoder's own walks (the same cells, faster).
-    let residual = matches!(
-        mode,
-        Mode::Residual | Mode::ResidualGivenPrevious | Mode::ResidualMinusPrevious
-    );
-    if fast && !residual {
-        let ok = match mode {
-            Mode::Mixed(k) => tree_walks::decode_mixed(dec, &mut q, width, bits, k, 0, prev, prev2),
-            Mode::MixedTwo(k, k2) => {
-                tree_walks::decode_mixed(dec, &mut q, width, bits, k, k2, prev, prev2)
-            }
-            Mode::TreeGivenPrevious(k) => {
-                tree_walks::decode_tree(dec, &mut q, bits, Some((prev, k)))
-            }
-            _ => tree_walks::decode_tree(dec, &mut q, bits, None),
-        };
-        return if ok { Ok(q) } else { Err(ended_early(&r)) };
-    }
+    let dec = if fast {
+        match tree_walks::decode(mode, dec, &mut q, width, bits, prev, prev2) {
+            Ok(true) => return Ok(q),
+            Ok(false) => return Err(ended_early(&r)),
+            Err(dec) => dec,
+        }
+    } else {
+        dec
+    };
     let mut coder = Decoder { dec, r: &r };
     code_cells(&mut coder, &mut q, width, bits, mode, prev, prev2)?;
     Ok(q)

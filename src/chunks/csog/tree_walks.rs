@@ -14,7 +14,7 @@
 //!   it up; the mixer's output gives the coder's 16-bit probability and the 12-bit one in one
 //!   load ([`SQUASH_AND_P16`]); the weights live on the stack.
 
-use super::adaptive_coder::{top_bits, Adaptive, Previous, NEIGHBOUR_CONTEXTS, ONE, P_MIN};
+use super::adaptive_coder::{top_bits, Adaptive, Mode, Previous, NEIGHBOUR_CONTEXTS, ONE, P_MIN};
 use super::cells::neighbours;
 use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
 use crate::entropy::bit_mixer::{BIAS, LEARNING_SHIFT, SQUASH_AND_P16, STRETCH_X8, WEIGHT_LIMIT};
@@ -73,9 +73,33 @@ fn view<T>(t: &mut [T], base: usize) -> &mut [T; NODES] {
         .expect("tables are padded by NODES")
 }
 
+/// Decode the cells of a channel in `mode` into `q` (zeros on entry): whether the stream was
+/// valid, or for modes 0-2 `dec` back. The caller has checked the mode against `bits`, `prev`
+/// and `prev2`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn decode(
+    mode: Mode,
+    dec: BinaryRangeDecoder,
+    q: &mut [u16],
+    width: usize,
+    bits: u8,
+    prev: Previous,
+    prev2: Previous,
+) -> Result<bool, BinaryRangeDecoder> {
+    Ok(match mode {
+        Mode::Mixed(k) => decode_mixed(dec, q, width, bits, k, 0, prev, prev2),
+        Mode::MixedTwo(k, k2) => decode_mixed(dec, q, width, bits, k, k2, prev, prev2),
+        Mode::TreeGivenPrevious(k) => decode_tree(dec, q, bits, Some((prev, k))),
+        Mode::Tree => decode_tree(dec, q, bits, None),
+        Mode::Residual | Mode::ResidualGivenPrevious | Mode::ResidualMinusPrevious => {
+            return Err(dec)
+        }
+    })
+}
+
 /// Decode the cells of a mode 3 (`given`: the previous channel and its top `k` bits) or mode
 /// 4 channel into `q`; `false` if the stream is not valid. The caller has checked the mode.
-pub(super) fn decode_tree(
+fn decode_tree(
     dec: BinaryRangeDecoder,
     q: &mut [u16],
     bits: u8,
@@ -120,7 +144,7 @@ fn tree(
 /// `false` if the stream is not valid (`adaptive_coder`'s walk would fail at some bit). The
 /// caller has checked the mode against `bits`, `prev` and `prev2`.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn decode_mixed(
+fn decode_mixed(
     dec: BinaryRangeDecoder,
     q: &mut [u16],
     width: usize,
