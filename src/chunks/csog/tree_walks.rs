@@ -15,7 +15,6 @@
 //!   load ([`SQUASH_AND_P16`]); the weights live on the stack.
 
 use super::adaptive_coder::{top_bits, Adaptive, Mode, Previous, NEIGHBOUR_CONTEXTS, ONE, P_MIN};
-use super::cells::neighbours;
 use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
 use crate::entropy::bit_mixer::{BIAS, LEARNING_SHIFT, SQUASH_AND_P16, STRETCH_X8, WEIGHT_LIMIT};
 
@@ -191,8 +190,13 @@ fn walk<const N: usize>(
     first[N - 1] = 0;
     let mut weights = [first; LEVELS];
     let o0 = view(&mut order0, 0);
+    // The cell's column, kept as the walk goes (what `neighbours` works out with a division).
+    let mut x = 0usize;
     for i in 0..q.len() {
-        let (a, up, _, ha, hu) = neighbours(q, i, width);
+        let (ha, hu) = (x > 0, i >= width);
+        let a = if ha { q[i - 1] } else { 0 };
+        let up = if hu { q[i - width] } else { 0 };
+        x = if x + 1 == width { 0 } else { x + 1 };
         let side = |v: u16, has: bool| if has { 1 + (v >> top) as usize } else { 0 };
         let nbase = (side(a, ha) * 5 + side(up, hu)).min(NEIGHBOUR_CONTEXTS - 1) << b;
         let [x1, x2] = if N >= 4 { contexts(i) } else { [0, 0] };
