@@ -29,6 +29,8 @@ pub struct BinaryRangeDecoder {
     range: u64,
     /// Invariant: `point - lower < range` (wrapping).
     point: u64,
+    /// Whether a step of [`Self::binary_deferred`] met an invalid state.
+    invalid: bool,
 }
 
 impl BinaryRangeDecoder {
@@ -49,6 +51,7 @@ impl BinaryRangeDecoder {
             lower: 0,
             range: u64::MAX,
             point,
+            invalid: false,
         }
     }
 
@@ -72,6 +75,33 @@ impl BinaryRangeDecoder {
         self.range = split ^ ((split ^ range_if_one) & ones);
         self.renormalise();
         Ok(bit)
+    }
+
+    /// [`Self::binary`] for a loop that checks for errors once, at its end ([`Self::failed`]):
+    /// where `binary` returns an error, this marks the stream failed and goes on with some
+    /// bit (the range stays non-zero, so nothing can panic or loop), saving a branch and an
+    /// error path in every step of a hot loop. The bits up to the first failure are those of
+    /// `binary`.
+    #[inline(always)]
+    pub fn binary_deferred(&mut self, p0: u32) -> bool {
+        debug_assert!(p0 > 0 && p0 < 1 << PRECISION);
+        let scale = self.range >> PRECISION;
+        let offset = self.point.wrapping_sub(self.lower);
+        self.invalid |= offset >= scale << PRECISION;
+        let split = scale * p0 as u64;
+        let bit = offset >= split;
+        let ones = (bit as u64).wrapping_neg();
+        self.lower = self.lower.wrapping_add(split & ones);
+        let range_if_one = (scale << PRECISION) - split;
+        self.range = split ^ ((split ^ range_if_one) & ones);
+        self.renormalise();
+        bit
+    }
+
+    /// Whether a step of [`Self::binary_deferred`] failed: `binary` would have returned an
+    /// error at that step or before.
+    pub fn failed(&self) -> bool {
+        self.invalid
     }
 
     /// The next bit of a two-symbol categorical model at precision 24 (`RNTC` segments,
@@ -113,7 +143,7 @@ impl BinaryRangeDecoder {
         Ok(v)
     }
 
-    #[inline]
+    #[inline(always)]
     fn renormalise(&mut self) {
         if self.range < RENORMALISE_BELOW {
             self.lower <<= 32;

@@ -21,6 +21,29 @@ pub fn squash(d: i32) -> i32 {
 /// [`squash`] at every `d` in `[-2047, 2047]`.
 static SQUASH: [i16; 4095] = build_squash();
 
+/// At `d + 2047` for every `d` in `[-2047, 2047]`: `squash(d)` in the low 16 bits, and in the
+/// high 16 the coder's 16-bit probability of codec 5 modes 5-6, `(squash(d) << 4)` kept in
+/// `[32, 65504]` (format-spec §6.5.3): both from one load in the decoder's loop.
+pub(crate) static SQUASH_AND_P16: [u32; 4095] = build_squash_and_p16();
+
+const fn build_squash_and_p16() -> [u32; 4095] {
+    let mut t = [0u32; 4095];
+    let mut d = -2047i32;
+    while d <= 2047 {
+        let p12 = squash_const(d) as u32;
+        let mut p16 = p12 << 4;
+        if p16 < 32 {
+            p16 = 32;
+        }
+        if p16 > 65504 {
+            p16 = 65504;
+        }
+        t[(d + 2047) as usize] = p12 | p16 << 16;
+        d += 1;
+    }
+    t
+}
+
 const fn build_squash() -> [i16; 4095] {
     let mut t = [0i16; 4095];
     let mut d = -2047i32;
@@ -66,6 +89,21 @@ const fn build_stretch() -> [i16; 4096] {
     t
 }
 
+/// `stretch(p16 >> 4) << 3` at every `p16 >> 4` (the log-odds of a 16-bit probability, in
+/// the units of [`stretch`] times 8: the decoder of codec 5 modes 5-6 keeps 3 more bits of
+/// a model beside it).
+pub(crate) static STRETCH_X8: [i16; 4096] = build_stretch_x8();
+
+const fn build_stretch_x8() -> [i16; 4096] {
+    let mut t = build_stretch();
+    let mut i = 0;
+    while i < 4096 {
+        t[i] <<= 3;
+        i += 1;
+    }
+    t
+}
+
 /// 12-bit probability to log-odds (units of 1/256, `[-2047, 2047]`).
 #[inline]
 pub fn stretch(p12: u32) -> i32 {
@@ -73,11 +111,11 @@ pub fn stretch(p12: u32) -> i32 {
 }
 
 /// Log-odds of the constant bias input.
-const BIAS: i32 = 256;
+pub(crate) const BIAS: i32 = 256;
 /// Learning rate: a weight moves `err * input >> LEARNING_SHIFT` (weights in 1/65536).
-const LEARNING_SHIFT: u32 = 10;
+pub(crate) const LEARNING_SHIFT: u32 = 10;
 /// Weights stay in `[-WEIGHT_LIMIT, WEIGHT_LIMIT]`.
-const WEIGHT_LIMIT: i32 = 1 << 22;
+pub(crate) const WEIGHT_LIMIT: i32 = 1 << 22;
 
 /// One weight vector per selector value (codec 5 mode 5: the tree level), each over `N`
 /// log-odds: `N - 1` model predictions and the bias, last.

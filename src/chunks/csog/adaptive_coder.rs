@@ -24,6 +24,7 @@ use constriction::stream::queue::DefaultRangeEncoder;
 use constriction::stream::Encode;
 
 use super::cells::{class_of, neighbours, predict, read_words, zigzag};
+use super::tree_walks;
 use crate::bytes::{ByteReader, PutLe};
 use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
 use crate::entropy::bit_mixer::Mixer;
@@ -31,9 +32,9 @@ use crate::error::Result;
 
 /// Probability precision of the binary models.
 const PRECISION: usize = 16;
-const ONE: u32 = 1 << PRECISION;
+pub(super) const ONE: u32 = 1 << PRECISION;
 /// Probabilities stay in `[P_MIN, ONE - P_MIN]`.
-const P_MIN: u32 = 32;
+pub(super) const P_MIN: u32 = 32;
 /// Slowest adaptation: a model moves `1/2^MAX_SHIFT` of the way to each new bit.
 const MAX_SHIFT: u32 = 6;
 /// Activity contexts (modes 0-2) and previous-residual classes (modes 1-2).
@@ -63,7 +64,14 @@ impl Adaptive {
         seen: 0,
     };
 
-    fn update(&mut self, bit: bool) {
+    /// The probability of a 0 bit, in units of `2^-16`.
+    #[inline(always)]
+    pub(super) fn p(self) -> u32 {
+        self.p as u32
+    }
+
+    #[inline(always)]
+    pub(super) fn update(&mut self, bit: bool) {
         let shift = (self.seen as u32 + 1).min(MAX_SHIFT);
         let p = self.p as u32;
         // Both sides, then a select: the bit is unpredictable, so a branch would often miss.
@@ -106,6 +114,7 @@ pub(crate) trait BitCoder {
     /// a 0 bit; no model learns from it.
     fn code_p(&mut self, p0: u32, bit: bool) -> Result<bool>;
     /// Code `bit` with model `m`'s probability, then let `m` learn it.
+    #[inline(always)]
     fn code(&mut self, m: &mut Adaptive, bit: bool) -> Result<bool> {
         let bit = self.code_p(m.p as u32, bit)?;
         m.update(bit);
@@ -171,29 +180,33 @@ pub(crate) struct Decoder<'a> {
 }
 
 impl BitCoder for Decoder<'_> {
+    #[inline(always)]
     fn code_p(&mut self, p0: u32, _: bool) -> Result<bool> {
-        self.dec.binary(p0).map_err(|_| {
-            Error::payload(
-                ChunkType::CSOG,
-                "range coder stream ended early",
-                self.r.offset(),
-            )
-        })
+        match self.dec.binary(p0) {
+            Ok(bit) => Ok(bit),
+            Err(_) => Err(ended_early(self.r)),
+        }
     }
 
+    #[inline]
     fn uniform(&mut self, _: u32, k: u8) -> Result<u32> {
         if k == 0 {
             return Ok(0);
         }
         let k = k.min(PRECISION as u8);
-        self.dec.uniform(k as u32).map_err(|_| {
-            Error::payload(
-                ChunkType::CSOG,
-                "range coder stream ended early",
-                self.r.offset(),
-            )
-        })
+        self.dec.uniform(k as u32).map_err(|_| ended_early(self.r))
     }
+}
+
+/// The error of a stream that the range decoder cannot continue (out of the hot loops).
+#[cold]
+#[inline(never)]
+fn ended_early(r: &ByteReader) -> Error {
+    Error::payload(
+        ChunkType::CSOG,
+        "range coder stream ended early",
+        r.offset(),
+    )
 }
 
 /// The range decoder of a stream that fills the rest of `r`: a word count, the words, and
@@ -441,11 +454,11 @@ fn code_cells<C: BitCoder>(
 
 /// Neighbour contexts of mode 5: each of the left and upper neighbours is absent (0) or its
 /// top two bits plus one (1..=4).
-const NEIGHBOUR_CONTEXTS: usize = 25;
+pub(super) const NEIGHBOUR_CONTEXTS: usize = 25;
 
 /// The top `k` bits of a channel's cells as a context: how many contexts there are, and cell
 /// `i`'s (previous cells fit their bits when decoded; `min` keeps a bad caller in range).
-fn top_bits((cells, b): (&[u16], u8), k: u8) -> (usize, impl Fn(usize) -> usize + '_) {
+pub(super) fn top_bits((cells, b): (&[u16], u8), k: u8) -> (usize, impl Fn(usize) -> usize + '_) {
     let shift = b.saturating_sub(k);
     let contexts = 1usize << k.min(b);
     (contexts, move |i: usize| {
@@ -588,12 +601,38 @@ pub fn candidate_modes(bits: u8, prev: Previous, prev2: Previous) -> Vec<Mode> {
 /// Decode `n` cells of codec 5; `prev` is the previous channel record's cells and bits,
 /// `prev2` the record's before it.
 pub fn decode(
+    r: ByteReader,
+    n: usize,
+    width: usize,
+    bits: u8,
+    prev: Previous,
+    prev2: Previous,
+) -> Result<Vec<u16>> {
+    decode_walk(r, n, width, bits, prev, prev2, true)
+}
+
+/// [`decode`] through the walk both directions share in every mode (the reference of
+/// [`tree_walks`]).
+#[cfg(test)]
+pub(super) fn decode_with_shared_walk(
+    r: ByteReader,
+    n: usize,
+    width: usize,
+    bits: u8,
+    prev: Previous,
+    prev2: Previous,
+) -> Result<Vec<u16>> {
+    decode_walk(r, n, width, bits, prev, prev2, false)
+}
+
+fn decode_walk(
     mut r: ByteReader,
     n: usize,
     width: usize,
     bits: u8,
     prev: Previous,
     prev2: Previous,
+    fast: bool,
 ) -> Result<Vec<u16>> {
     let (m, k) = (r.u8("adaptive mode")?, r.u8("adaptive context bits")?);
     let mode = Mode::from_bytes(m, k).ok_or_else(|| {
@@ -612,6 +651,16 @@ pub fn decode(
     }
     let dec = open_stream(&mut r, "adaptive")?;
     let mut q = vec![0u16; n];
+    // Modes 3-6 through the decoder's own walks (the same cells, faster).
+    let dec = if fast {
+        match tree_walks::decode(mode, dec, &mut q, width, bits, prev, prev2) {
+            Ok(true) => return Ok(q),
+            Ok(false) => return Err(ended_early(&r)),
+            Err(dec) => dec,
+        }
+    } else {
+        dec
+    };
     let mut coder = Decoder { dec, r: &r };
     code_cells(&mut coder, &mut q, width, bits, mode, prev, prev2)?;
     Ok(q)

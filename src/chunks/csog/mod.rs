@@ -31,6 +31,7 @@ mod reader;
 mod records;
 mod rotation_coarsening;
 mod set_coder;
+mod tree_walks;
 mod writer;
 
 pub use describe::{describe, CsogSummary, RecordSummary};
