@@ -60,7 +60,9 @@ fn c_player_prints_the_rust_checksums() {
     let fps = model.scene.fps();
     let mut times: Vec<f64> = Vec::new();
     for g in 0..3u32 {
+        // Two consecutive frames, as a player asks for them: the next GOP is decoded ahead.
         times.push((g * 20) as f64 / fps);
+        times.push((g * 20 + 1) as f64 / fps);
         times.push((g * 20 + 19) as f64 / fps);
     }
     times.extend([1.2345 / fps, 37.5 / fps, model.scene.duration_seconds()]);
@@ -96,8 +98,8 @@ fn c_player_prints_the_rust_checksums() {
         unique.sort();
         unique.dedup();
         assert_eq!(unique.len(), want.len());
-        // GOPs 1 and 2 were decoded ahead (each after two requests in time order in the GOP
-        // before it); the frames are the Rust decoder's all the same.
+        // GOPs 1 and 2 were decoded ahead (each after two consecutive frames of the GOP before
+        // it); the frames are the Rust decoder's all the same.
         assert!(lines.contains(&"GOPs ready from read-ahead: 2"), "{stdout}");
         assert_eq!(
             lines.last().copied(),

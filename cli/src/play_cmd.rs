@@ -41,6 +41,10 @@ pub struct PlayArgs {
     /// core for the frames on a 2-core machine: docs/benchmarks/play.md has the drops for 1 and 2.
     #[arg(long, default_value_t = 1)]
     pub gop_threads: usize,
+    /// Decoded GOPs that may wait for the player (the memory budget: about 45 MB per GOP of
+    /// the 273k-Gaussian stream). 2 lets the GOP thread stay busy through a GOP boundary.
+    #[arg(long, default_value_t = 2)]
+    pub gops_ahead: usize,
     /// Scaffold-GS files (whose Gaussians are generated per camera): frame f is decoded for
     /// camera f mod the cameras given (`--view` for one fixed camera; default: the orbit
     /// `dlgs render` uses). 3DGS files ignore these options.
@@ -163,7 +167,7 @@ fn peek_variant(mut src: Source) -> Result<(Variant, Source)> {
 pub(crate) fn pipeline_options(args: &PlayArgs) -> PipelineOptions {
     PipelineOptions {
         gop_threads: args.gop_threads.max(1),
-        ..Default::default()
+        gops_ahead: args.gops_ahead.max(1),
     }
 }
 

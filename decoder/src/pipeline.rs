@@ -76,7 +76,7 @@ impl Default for PipelineOptions {
     fn default() -> Self {
         PipelineOptions {
             gop_threads: 1,
-            gops_ahead: 1,
+            gops_ahead: 2,
         }
     }
 }

@@ -1,6 +1,6 @@
-//! Read-ahead in the random-access decoder: once a caller asks for frames of GOP g in time
-//! order (two requests in g, the second later than the first), GOP g + 1 is decoded on a
-//! thread of its own while the frames of g are decoded on the caller's, so a player that walks
+//! Read-ahead in the random-access decoder: once a caller asks for frames of GOP g as a
+//! player does (two requests in g, the second later than the first by at most four frame
+//! periods), GOP g + 1 is decoded on a thread of its own while the frames of g are decoded on the caller's, so a player that walks
 //! through time does not stall at each GOP boundary. It is the playback pipeline of
 //! [`crate::pipeline`] for callers that own a seekable source (the C ABI, Python).
 //!
@@ -12,6 +12,7 @@
 //! the same with and without read-ahead.
 
 use std::io::{Read, Seek};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::Arc;
 
@@ -28,6 +29,9 @@ pub(crate) struct ReadAhead {
     /// Built on first use (a decoder that never plays forward starts no thread).
     pool: Option<rayon::ThreadPool>,
     pending: Option<(u32, Receiver<Decoded>)>,
+    /// Set when the pending GOP is no longer wanted (another was scheduled, read-ahead was
+    /// reset, the decoder dropped): its job stops at its next stage.
+    cancel: Arc<AtomicBool>,
     /// The GOP and time of the last frame request.
     last_request: Option<(u32, f64)>,
     /// GOPs taken from the read-ahead thread instead of decoded in turn.
@@ -40,9 +44,16 @@ impl ReadAhead {
             enabled,
             pool: None,
             pending: None,
+            cancel: Arc::new(AtomicBool::new(false)),
             last_request: None,
             hits: 0,
         }
+    }
+}
+
+impl Drop for ReadAhead {
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
     }
 }
 
@@ -88,7 +99,11 @@ impl<R: Read + Seek> Decoder<R> {
     /// A frame at time `t` of GOP `g` was asked for: start decoding GOP `g + 1` if this is
     /// playback in time order and it is not decoded or under way.
     pub(crate) fn frame_requested(&mut self, g: u32, t: f64) {
-        let forward = matches!(self.ahead.last_request, Some((lg, lt)) if lg == g && t > lt);
+        // Playback, not a jump: random seeks that happen to land later in the same GOP do not
+        // start a GOP decode that would compete with the next seek.
+        let period = 1.0 / self.scene().fps();
+        let forward = matches!(self.ahead.last_request,
+            Some((lg, lt)) if lg == g && t > lt && t - lt <= 4.0 * period);
         self.ahead.last_request = Some((g, t));
         let next = g + 1;
         if !self.ahead.enabled
@@ -131,6 +146,9 @@ impl<R: Read + Seek> Decoder<R> {
             self.ahead.pool = Some(pool);
         }
         let (tx, rx) = sync_channel(1);
+        self.ahead.cancel.store(true, Ordering::Relaxed);
+        self.ahead.cancel = Arc::new(AtomicBool::new(false));
+        let cancel = self.ahead.cancel.clone();
         self.ahead.pending = Some((g, rx));
         let pool = self.ahead.pool.as_ref().expect("built above");
         pool.spawn(move || {
@@ -141,10 +159,18 @@ impl<R: Read + Seek> Decoder<R> {
                     .map(|(_, p)| std::mem::take(p))
                     .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(c.ty), c.offset))
             };
-            // The order of the in-turn decode: payloads, state, then time features.
+            // The order of the in-turn decode: payloads, state, then time features. A cancelled
+            // job stops between stages (its receiver is gone; nothing is sent).
+            let stopped = || cancel.load(Ordering::Relaxed);
+            if stopped() {
+                return;
+            }
             let decoded = (|| {
                 let dynamic = build::dynamic_payloads(&scene, &infos, gop_at, &mut payload)?;
                 let state = build::state(&scene, &limits, &infos, gop_at, base.as_ref(), payload)?;
+                if stopped() {
+                    return Err(Error::request("read-ahead cancelled"));
+                }
                 let dynamic = dynamic
                     .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), &p))
                     .transpose()?;
