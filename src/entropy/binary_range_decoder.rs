@@ -65,16 +65,23 @@ impl BinaryRangeDecoder {
         if offset >= scale << PRECISION {
             return Err(InvalidData);
         }
+        Ok(self.split::<PRECISION>(scale, offset, p0))
+    }
+
+    /// The step shared by the binary models at precision `P`, after the caller's check of
+    /// `offset` against `scale << P`: the bit, and the range narrowed to its side.
+    #[inline(always)]
+    fn split<const P: u32>(&mut self, scale: u64, offset: u64, p0: u32) -> bool {
         let split = scale * p0 as u64;
         let bit = offset >= split;
         // Branch-free: the bit is as unpredictable as the data is compressed, and a
         // mispredicted branch costs more than computing both sides.
         let ones = (bit as u64).wrapping_neg();
         self.lower = self.lower.wrapping_add(split & ones);
-        let range_if_one = (scale << PRECISION) - split;
+        let range_if_one = (scale << P) - split;
         self.range = split ^ ((split ^ range_if_one) & ones);
         self.renormalise();
-        Ok(bit)
+        bit
     }
 
     /// [`Self::binary`] for a loop that checks for errors once, at its end ([`Self::failed`]):
@@ -88,14 +95,7 @@ impl BinaryRangeDecoder {
         let scale = self.range >> PRECISION;
         let offset = self.point.wrapping_sub(self.lower);
         self.invalid |= offset >= scale << PRECISION;
-        let split = scale * p0 as u64;
-        let bit = offset >= split;
-        let ones = (bit as u64).wrapping_neg();
-        self.lower = self.lower.wrapping_add(split & ones);
-        let range_if_one = (scale << PRECISION) - split;
-        self.range = split ^ ((split ^ range_if_one) & ones);
-        self.renormalise();
-        bit
+        self.split::<PRECISION>(scale, offset, p0)
     }
 
     /// Whether a step of [`Self::binary_deferred`] failed: `binary` would have returned an
@@ -116,14 +116,7 @@ impl BinaryRangeDecoder {
         if offset >= scale << P {
             return Err(InvalidData);
         }
-        let split = scale * p0 as u64;
-        let bit = offset >= split;
-        let ones = (bit as u64).wrapping_neg();
-        self.lower = self.lower.wrapping_add(split & ones);
-        let range_if_one = (scale << P) - split;
-        self.range = split ^ ((split ^ range_if_one) & ones);
-        self.renormalise();
-        Ok(bit)
+        Ok(self.split::<P>(scale, offset, p0))
     }
 
     /// A value of `k` bits, `1 <= k <= 16`, each of the `2^k` equally likely.
