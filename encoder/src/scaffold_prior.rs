@@ -12,22 +12,12 @@
 use bitvec::prelude::*;
 use dlgs::chunks::ahac::{HacAnchors, REFERENCE_BATCH};
 use dlgs::model::hac_context::{GridShape, HacContext, ATTR_CHANNELS, CONTEXT_OUT};
-use dlgs::model::scaffold::{Anchors, ScaffoldCanonical};
+use dlgs::model::scaffold::ScaffoldCanonical;
 use dlgs::{Error, Result};
 
 /// Steps of feature, log-scaling and offsets used when none are given: fine enough that the
 /// fixture's anchors render at > 60 dB against the raw ones (docs/benchmarks/scaffold.md).
 pub const DEFAULT_PRIOR_STEPS: [f32; 3] = [0.01, 0.001, 0.002];
-
-/// Every anchor, static then dynamic, in one set.
-fn all_anchors(c: &ScaffoldCanonical) -> Anchors {
-    let mut a = c.statics.clone();
-    a.positions.extend_from_slice(&c.dynamics.positions);
-    a.features.extend_from_slice(&c.dynamics.features);
-    a.log_scalings.extend_from_slice(&c.dynamics.log_scalings);
-    a.offsets.extend_from_slice(&c.dynamics.offsets);
-    a
-}
 
 /// The anchors' box, widened where it is flat so that `bmax > bmin` on every axis.
 fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
@@ -94,7 +84,7 @@ pub fn prior_anchors(c: &ScaffoldCanonical, steps: [f32; 3]) -> Result<HacAnchor
             "anchor steps {steps:?}: each must be finite and > 0"
         )));
     }
-    let all = all_anchors(c);
+    let all = c.joined();
     let attrs: [&[f32]; 3] = [&all.features, &all.log_scalings, &all.offsets];
     let bad = |v: &f32| !v.is_finite();
     if all.positions.iter().flatten().any(bad) || attrs.iter().any(|a| a.iter().any(bad)) {

@@ -350,6 +350,17 @@ impl ScaffoldCanonical {
         }
     }
 
+    /// Static then dynamic anchors in one set (the inverse of [`Self::split_at`]).
+    pub fn joined(&self) -> Anchors {
+        let mut all = self.statics.clone();
+        all.positions.extend_from_slice(&self.dynamics.positions);
+        all.features.extend_from_slice(&self.dynamics.features);
+        all.offsets.extend_from_slice(&self.dynamics.offsets);
+        all.log_scalings
+            .extend_from_slice(&self.dynamics.log_scalings);
+        all
+    }
+
     /// The canonical anchors `field` (an `RNTC` of a Scaffold-GS scene) makes of this reference
     /// state (format-spec §6.6.5, §6.12): each selected set's rows are evaluated at the
     /// reference's canonical positions and added, f32, to the selected groups; positions and

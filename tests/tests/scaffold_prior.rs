@@ -20,15 +20,6 @@ fn fixture_anchors() -> ScaffoldCanonical {
     ScaffoldCanonical::split_at(g.anchors.clone(), n_static)
 }
 
-fn all(c: &ScaffoldCanonical) -> Anchors {
-    let mut a = c.statics.clone();
-    a.positions.extend_from_slice(&c.dynamics.positions);
-    a.features.extend_from_slice(&c.dynamics.features);
-    a.log_scalings.extend_from_slice(&c.dynamics.log_scalings);
-    a.offsets.extend_from_slice(&c.dynamics.offsets);
-    a
-}
-
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
     a.iter()
@@ -55,7 +46,7 @@ fn round_trip(
 }
 
 fn check_within_half_a_step(input: &ScaffoldCanonical, out: &ScaffoldCanonical, steps: [f32; 3]) {
-    let (a, b) = (all(input), all(out));
+    let (a, b) = (input.joined(), out.joined());
     assert_eq!(b.len(), a.len());
     let slack = |q: f32, v: &[f32]| q * 0.5 + v.iter().fold(0f32, |m, x| m.max(x.abs())) * 1e-6;
     assert!(max_diff(&a.features, &b.features) <= slack(steps[0], &a.features));
@@ -103,7 +94,7 @@ fn the_fixtures_anchors_code_with_the_prior_smaller_than_raw() {
         println!("steps {steps:?}: AHAC with the prior {bytes} B, raw ANCR {raw} B");
         check_within_half_a_step(&c, &d1, steps);
         let bits = |c: &ScaffoldCanonical| {
-            let a = all(c);
+            let a = c.joined();
             let v: Vec<u32> = a
                 .positions
                 .iter()
