@@ -160,17 +160,20 @@ impl<R: Read + Seek> Decoder<R> {
                     .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(c.ty), c.offset))
             };
             // The order of the in-turn decode: payloads, state, then time features. A cancelled
-            // job stops between stages (its receiver is gone; nothing is sent).
+            // job stops between stages and sends nothing (its receiver is gone).
             let stopped = || cancel.load(Ordering::Relaxed);
             if stopped() {
                 return;
             }
-            let decoded = (|| {
-                let dynamic = build::dynamic_payloads(&scene, &infos, gop_at, &mut payload)?;
-                let state = build::state(&scene, &limits, &infos, gop_at, base.as_ref(), payload)?;
-                if stopped() {
-                    return Err(Error::request("read-ahead cancelled"));
-                }
+            let first =
+                build::dynamic_payloads(&scene, &infos, gop_at, &mut payload).and_then(|dynamic| {
+                    build::state(&scene, &limits, &infos, gop_at, base.as_ref(), payload)
+                        .map(|state| (dynamic, state))
+                });
+            if stopped() {
+                return;
+            }
+            let decoded = first.and_then(|(dynamic, state)| {
                 let dynamic = dynamic
                     .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), &p))
                     .transpose()?;
@@ -178,7 +181,7 @@ impl<R: Read + Seek> Decoder<R> {
                 // A key that fails here fails again in the frame that needs it.
                 let _ = gop.prepare_keys(0..usize::MAX);
                 Ok((state, Arc::new(gop)))
-            })();
+            });
             let _ = tx.send(decoded);
         });
         Ok(())
