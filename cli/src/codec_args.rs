@@ -12,7 +12,7 @@ use dlgs::chunks::mlpw::WeightType;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs_encoder::{
-    CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, ResidualConfig, SortSpec,
+    CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, LowDelay, ResidualConfig, SortSpec,
 };
 
 /// Encoder settings shared by `encode`, `synth`, `ingest` and `rd`.
@@ -223,6 +223,18 @@ pub struct CodecArgs {
         long
     )]
     pub intra_features: bool,
+    /// Which GOPs' time-feature streams are coded without B-frames, so that their first
+    /// pictures decode from their first packets: `first` (default: playback starts after 2 of
+    /// GOP 0's 7 key pictures), `all` (cold seeks also decode only the pictures up to t), or
+    /// `off`. Costs about 14 % of such a GOP's time-feature bytes at the same PSNR
+    /// (docs/benchmarks/dynamic.md).
+    #[arg(
+        help_heading = "Dynamic streams: time features, decoders and residuals",
+        long,
+        default_value = "first",
+        value_parser = ["first", "all", "off"]
+    )]
+    pub low_delay_features: String,
     /// Store time features as exact f32 (zstd) instead of HEVC.
     #[arg(
         help_heading = "Dynamic streams: time features, decoders and residuals",
@@ -546,6 +558,11 @@ impl CodecArgs {
                         preset: self.preset.clone(),
                         lossless: self.lossless_features,
                         intra_only: self.intra_features,
+                        low_delay: match self.low_delay_features.as_str() {
+                            "all" => LowDelay::EveryGop,
+                            "off" => LowDelay::Off,
+                            _ => LowDelay::FirstGop,
+                        },
                     })
                 },
                 per_gop_range: self.per_gop_range,

@@ -10,6 +10,7 @@ use dlgs::model::DeformMlps;
 use dlgs::{Error, FormatErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
+use crate::low_delay::{Dequantise, LowDelayKeys};
 use crate::planar::{KeySource, PlanarFeatures};
 use crate::{DecodedGop, Deformer, State};
 
@@ -19,7 +20,7 @@ fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
 
 /// Decode key pictures with `hevc`, or fail with `NoHevcDecoder` when there is none. A
 /// decoder's failure is a fault of the `TFEA` payload at `at`.
-fn key_pictures(
+pub(crate) fn key_pictures(
     hevc: Option<&SharedKeyPictureDecoder>,
     packets: &[&[u8]],
     tiling: &Tiling,
@@ -36,14 +37,20 @@ fn key_pictures(
             expect,
         )
         .map_err(bad)?;
-    // A plugged-in decoder is not trusted: its pictures are checked before they are untiled.
-    let side = tiling.width() * tiling.height();
     if pictures.len() != expect {
         return Err(bad(format!(
             "the HEVC decoder gave {} pictures, {expect} expected",
             pictures.len()
         )));
     }
+    check_pictures(&pictures, tiling, at)?;
+    Ok(pictures)
+}
+
+/// A plugged-in decoder is not trusted: its pictures are checked before they are untiled.
+pub(crate) fn check_pictures(pictures: &[Vec<u16>], tiling: &Tiling, at: u64) -> Result<()> {
+    let bad = |reason: String| Error::payload(ChunkType::TFEA, reason, at);
+    let side = tiling.width() * tiling.height();
     if let Some(p) = pictures.iter().find(|p| p.len() != side) {
         return Err(bad(format!(
             "the HEVC decoder gave a picture of {} samples, {side} expected",
@@ -55,7 +62,7 @@ fn key_pictures(
             "the HEVC decoder gave sample {v}, above 12 bits"
         )));
     }
-    Ok(pictures)
+    Ok(())
 }
 
 /// Decode a GOP's canonical chunk, or apply its residual chunk to `base` (the reference GOP's
@@ -184,6 +191,22 @@ pub(crate) fn decode_time_features(
             packets,
             ..
         } => {
+            // Low-delay streams decode the keys a frame needs from a prefix, when first needed.
+            let dequantise = match reference {
+                Some(range) => Dequantise::Reference(range),
+                None => Dequantise::Ranges(ranges.clone()),
+            };
+            let packets = match LowDelayKeys::new(tiling, dequantise, packets, at, hevc.cloned()) {
+                Ok(keys) => {
+                    return Ok(PlanarFeatures::per_key(
+                        tiling.n,
+                        tiling.keys,
+                        tiling.channels,
+                        Arc::new(keys),
+                    ))
+                }
+                Err(packets) => packets,
+            };
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
             let frames = key_pictures(hevc, &refs, &tiling, tiling.keys, at)?;
             let data = match reference {

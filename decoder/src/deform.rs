@@ -205,6 +205,11 @@ impl Deformer {
         })
     }
 
+    /// Time-feature keys per GOP.
+    pub fn key_count(&self) -> usize {
+        self.features.keys
+    }
+
     /// Time-feature keys decoded so far (intra-only features decode the keys frames need).
     pub fn loaded_keys(&self) -> usize {
         self.features.loaded_keys()

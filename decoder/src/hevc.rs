@@ -9,6 +9,8 @@
 
 use std::sync::Arc;
 
+pub use crate::low_delay::pictures_in_decode_order;
+
 /// Decodes HEVC Main 12 4:0:0 access units into 12-bit gray pictures.
 ///
 /// HEVC decoding is exactly specified, so every conforming decoder gives the same samples and
@@ -24,6 +26,26 @@ pub trait KeyPictureDecoder: Send + Sync {
         height: u32,
         expect: usize,
     ) -> Result<Vec<Vec<u16>>, String>;
+
+    /// A decoder that takes one stream's packets one at a time ([`KeyPictureStream`]), when
+    /// this implementation has one: low-delay streams then decode key by key, each picture
+    /// once. Default: none (such streams decode from prefixes with [`Self::decode`]).
+    fn stream(
+        &self,
+        _width: u32,
+        _height: u32,
+        _expect: usize,
+    ) -> Option<Box<dyn KeyPictureStream>> {
+        None
+    }
+}
+
+/// One stream's decoder, fed packets in decode order.
+pub trait KeyPictureStream: Send {
+    /// Decode the next packet; the pictures it released, in output order.
+    fn push(&mut self, packet: &[u8]) -> Result<Vec<Vec<u16>>, String>;
+    /// The end of the stream: the pictures still held.
+    fn finish(&mut self) -> Result<Vec<Vec<u16>>, String>;
 }
 
 /// The shared handle the decoder keeps.
@@ -46,6 +68,26 @@ impl KeyPictureDecoder for Ffmpeg {
         dlgs_video::decode_gray12(packets, width, height, expect)
             .map(|v| v.frames)
             .map_err(|e| e.to_string())
+    }
+
+    fn stream(&self, width: u32, height: u32, expect: usize) -> Option<Box<dyn KeyPictureStream>> {
+        // A decoder FFmpeg cannot set up now fails again, with its message, in `decode`.
+        dlgs_video::Gray12Decoder::new(width, height, expect)
+            .ok()
+            .map(|d| Box::new(FfmpegStream(d)) as Box<dyn KeyPictureStream>)
+    }
+}
+
+#[cfg(feature = "hevc")]
+struct FfmpegStream(dlgs_video::Gray12Decoder);
+
+#[cfg(feature = "hevc")]
+impl KeyPictureStream for FfmpegStream {
+    fn push(&mut self, packet: &[u8]) -> Result<Vec<Vec<u16>>, String> {
+        self.0.push(packet).map_err(|e| e.to_string())
+    }
+    fn finish(&mut self) -> Result<Vec<Vec<u16>>, String> {
+        self.0.finish().map_err(|e| e.to_string())
     }
 }
 

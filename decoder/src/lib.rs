@@ -7,6 +7,7 @@ mod build;
 pub mod deform;
 pub mod hevc;
 pub mod interp;
+mod low_delay;
 mod lru;
 pub mod panel;
 pub mod pipeline;

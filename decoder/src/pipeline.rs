@@ -57,8 +57,15 @@ impl<R: Read + Send + 'static> GopSource for StreamDecoder<R> {
         });
     }
     fn finish_gop(gop: &DecodedGop) {
-        // A key that fails here fails again, with its error, in the frame that needs it.
-        let _ = gop.prepare_keys(0..usize::MAX);
+        // Interval by interval, so that a frame waiting for a key gets it as soon as it is
+        // decoded (low-delay streams decode key by key). A key that fails here fails again,
+        // with its error, in the frame that needs it.
+        let keys = gop.deformer.as_ref().map_or(0, |d| d.key_count());
+        for k in 0..keys.saturating_sub(1) {
+            if gop.prepare_keys(k..k + 2).is_err() {
+                return;
+            }
+        }
     }
 }
 

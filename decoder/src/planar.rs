@@ -14,9 +14,24 @@ use crate::interp::lerp;
 use crate::panel::{Lane, PANEL};
 
 /// Decodes one key's features, `(C, N)` column-major, on demand (intra-only HEVC time
-/// features: each key is its own picture).
+/// features: each key is its own picture; low-delay streams: a prefix of the stream).
 pub trait KeySource: Send + Sync {
     fn key(&self, k: usize) -> Result<Vec<f32>>;
+
+    /// Fill the slots of the keys of `needed` (each key's `(C, N)` block), and any other slot
+    /// the same work decoded; a slot already filled keeps its value (the same). Default: each
+    /// key of `needed` with [`Self::key`], in parallel.
+    fn fill(&self, needed: &[usize], slots: &[OnceLock<Vec<f32>>]) -> Result<()> {
+        let decoded: Vec<(usize, Vec<f32>)> = needed
+            .par_iter()
+            .map(|&k| self.key(k).map(|v| (k, v)))
+            .collect::<Result<_>>()?;
+        for (k, v) in decoded {
+            // Another thread may have filled it first with the same values.
+            let _ = slots[k].set(v);
+        }
+        Ok(())
+    }
 }
 
 #[derive(Clone)]
@@ -61,7 +76,8 @@ impl PlanarFeatures {
         }
     }
 
-    /// Features whose keys are decoded by `source` when first needed ([`Self::ensure_keys`]).
+    /// Features whose keys are decoded by `source` when first needed ([`Self::ensure_keys`]):
+    /// intra-only and low-delay HEVC streams.
     pub fn per_key(n: usize, keys: usize, channels: usize, source: Arc<dyn KeySource>) -> Self {
         PlanarFeatures {
             n,
@@ -82,15 +98,14 @@ impl PlanarFeatures {
         };
         let range = range.start.min(self.keys)..range.end.min(self.keys);
         let missing: Vec<usize> = range.filter(|&k| slots[k].get().is_none()).collect();
-        let decoded: Vec<(usize, Vec<f32>)> = missing
-            .into_par_iter()
-            .map(|k| source.key(k).map(|v| (k, v)))
-            .collect::<Result<_>>()?;
-        for (k, v) in decoded {
-            // The source is this crate's own untiling, sized by the tiling: not input.
+        if missing.is_empty() {
+            return Ok(());
+        }
+        source.fill(&missing, slots)?;
+        for k in missing {
+            // The sources are this crate's own untiling, sized by the tiling: not input.
+            let v = slots[k].get().expect("the source filled every needed key");
             assert_eq!(v.len(), self.channels * self.n, "key {k}'s (C, N) block");
-            // Another thread may have filled it first with the same values.
-            let _ = slots[k].set(v);
         }
         Ok(())
     }

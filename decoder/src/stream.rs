@@ -215,11 +215,22 @@ impl<R: Read> StreamDecoder<R> {
         let limits = self.limits.fresh();
         let hevc = self.hevc.clone();
         let dynamic_payloads = build::dynamic_payloads(&scene, &infos, gop_at, &mut payload)?;
+        let keys = match self.key_preparation {
+            KeyPreparation::All => 0..usize::MAX,
+            KeyPreparation::FirstInterval => 0..2,
+        };
+        // The keys to prepare are decoded here, beside the state (low-delay and intra-only
+        // streams decode only those; other streams decode whole anyway).
         let decode_dynamic = || {
             let t0 = Instant::now();
             let d = dynamic_payloads
                 .as_ref()
-                .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), p))
+                .map(|p| {
+                    let (features, mlps) =
+                        build::decode_dynamic(&scene, &limits, hevc.as_ref(), p)?;
+                    features.ensure_keys(keys.clone())?;
+                    Ok((features, mlps))
+                })
                 .transpose();
             (d, t0.elapsed())
         };
@@ -253,10 +264,6 @@ impl<R: Read> StreamDecoder<R> {
         self.last = Some((g, state.clone()));
         let gop = build::assemble(&scene, g, state, dynamic);
         let t0 = Instant::now();
-        let keys = match self.key_preparation {
-            KeyPreparation::All => 0..usize::MAX,
-            KeyPreparation::FirstInterval => 0..2,
-        };
         gop.prepare_keys(keys)?;
         self.last_times = GopTimes {
             state: state_time,

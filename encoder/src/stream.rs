@@ -386,7 +386,8 @@ impl<W: Write> StreamEncoder<W> {
                     height: tiling.height() as u32,
                     frames: tfea::tile(f, &tiling, &ranges),
                 };
-                let packets = dlgs_video::encode_gray12(&video, settings)
+                let settings = settings.for_gop(self.next_gop);
+                let packets = dlgs_video::encode_gray12(&video, &settings)
                     .map_err(|e| Error::input(format!("time-feature video: {e}")))?;
                 TfeaBody::Hevc {
                     tiling,

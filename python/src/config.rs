@@ -70,6 +70,7 @@ impl CodecOptions {
                         preset: self.preset.clone(),
                         lossless: self.lossless_features,
                         intra_only: self.intra_features,
+                        ..Default::default()
                     })
                 },
                 per_gop_range: self.per_gop_range,

@@ -180,15 +180,36 @@ pub fn untile_columns(
         .enumerate()
         .for_each(|(kc, col)| {
             let (k, c) = (kc / t.channels, kc % t.channels);
-            for (r, dst) in col.chunks_mut(t.side).enumerate() {
-                let start = t.pixel(r * t.side, c);
-                let src = &images[k][start..start + dst.len()];
-                for (d, &q) in dst.iter_mut().zip(src) {
-                    *d = value(c, q);
-                }
-            }
+            untile_column(&images[k], t, c, &value, col);
         });
     data
+}
+
+/// [`untile_columns`] of one key's image, `(C, N)`, on the calling thread only (for callers
+/// that hold a lock and must not wait on other threads' work).
+pub fn untile_key(image: &[u16], t: &Tiling, value: impl Fn(usize, u16) -> f32) -> Vec<f32> {
+    let mut data = vec![0f32; t.channels * t.n];
+    for (c, col) in data.chunks_mut(t.n.max(1)).enumerate() {
+        untile_column(image, t, c, &value, col);
+    }
+    data
+}
+
+/// Channel c's tile of `image`, row by row, into `col` (`n` values).
+fn untile_column(
+    image: &[u16],
+    t: &Tiling,
+    c: usize,
+    value: &impl Fn(usize, u16) -> f32,
+    col: &mut [f32],
+) {
+    for (r, dst) in col.chunks_mut(t.side).enumerate() {
+        let start = t.pixel(r * t.side, c);
+        let src = &image[start..start + dst.len()];
+        for (d, &q) in dst.iter_mut().zip(src) {
+            *d = value(c, q);
+        }
+    }
 }
 
 /// Codec 1 sample value (what [`untile`] stores).

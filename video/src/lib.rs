@@ -43,6 +43,43 @@ pub struct HevcSettings {
     /// Every picture an IDR picture with its own VPS/SPS/PPS, one packet each, so any picture
     /// decodes alone (a seek decodes the 2 keys it needs instead of the GOP's 7).
     pub intra_only: bool,
+    /// Which GOPs' streams are coded without B-frames (see [`LowDelay`]).
+    pub low_delay: LowDelay,
+}
+
+/// Streams coded without B-frames ("low delay": `sps_max_num_reorder_pics` 0, pictures in
+/// decode order), so a decoder gets the first pictures from the first packets alone: playback
+/// starts after the first key interval's 2 pictures instead of the GOP's 7, and a seek decodes
+/// only the pictures up to the keys it needs. They cost bytes: at crf 6 on the plant, +20.6 %
+/// `TFEA` bytes at +1 dB, +13.8 % at crf 7 for the same PSNR (docs/benchmarks/dynamic.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LowDelay {
+    /// B-frames everywhere (x265's default structure).
+    Off,
+    /// The first GOP only, where playback starts (the default).
+    #[default]
+    FirstGop,
+    /// Every GOP (faster cold seeks into one-stream features).
+    EveryGop,
+}
+
+impl HevcSettings {
+    /// The settings of GOP `g`'s stream: `low_delay` resolved to on (`EveryGop`) or `Off`.
+    pub fn for_gop(&self, g: u32) -> HevcSettings {
+        let on = match self.low_delay {
+            LowDelay::Off => false,
+            LowDelay::FirstGop => g == 0,
+            LowDelay::EveryGop => true,
+        };
+        HevcSettings {
+            low_delay: if on {
+                LowDelay::EveryGop
+            } else {
+                LowDelay::Off
+            },
+            ..self.clone()
+        }
+    }
 }
 
 impl Default for HevcSettings {
@@ -52,6 +89,7 @@ impl Default for HevcSettings {
             preset: "medium".into(),
             lossless: false,
             intra_only: false,
+            low_delay: LowDelay::default(),
         }
     }
 }
@@ -92,7 +130,8 @@ fn init() {
 }
 
 /// Encode `video` as HEVC Main 12 monochrome; returns the packets in decode order, each a
-/// self-contained Annex B access unit (the first carries VPS/SPS/PPS).
+/// self-contained Annex B access unit (the first carries VPS/SPS/PPS). The stream has no
+/// B-frames unless `s.low_delay` is `Off` (resolve it per GOP with [`HevcSettings::for_gop`]).
 pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, VideoError> {
     init();
     let (w, h) = (video.width, video.height);
@@ -124,6 +163,9 @@ pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, V
         params.push_str(":lossless=1");
     } else {
         opts.set("crf", &s.crf.to_string());
+    }
+    if s.low_delay != LowDelay::Off {
+        params.push_str(":bframes=0");
     }
     if s.intra_only {
         params.push_str(":keyint=1:min-keyint=1:open-gop=0:repeat-headers=1:bframes=0");
@@ -188,90 +230,128 @@ pub fn decode_gray12(
     height: u32,
     expect_frames: usize,
 ) -> Result<Gray12, VideoError> {
-    init();
-    let codec = ff::decoder::find(ff::codec::Id::HEVC).ok_or(VideoError::MissingCodec("HEVC"))?;
-    let ctx = ff::codec::context::Context::new_with_codec(codec);
-    // Bound what a hostile bitstream can make FFmpeg allocate: pictures much larger than the
-    // declared size are refused inside FFmpeg (AVCodecContext.max_pixels). The margin covers
-    // the coding-block padding FFmpeg adds before that check.
-    let mut opts = ff::Dictionary::new();
-    let max_pixels = (width as u64 + 128) * (height as u64 + 128);
-    opts.set("max_pixels", &max_pixels.to_string());
-    // Frame and wavefront threads (x265 writes WPP streams); HEVC decoding is bit-exact, so
-    // the thread count cannot change the features.
-    opts.set("threads", "auto");
-    let mut dec = ctx
-        .decoder()
-        .open_as_with(codec, opts)
-        .and_then(|o| o.video())
-        .map_err(ff_err("decoder setup"))?;
-    let mut out = Gray12 {
-        width,
-        height,
-        frames: Vec::with_capacity(expect_frames.min(4096)),
-    };
+    let mut dec = Gray12Decoder::new(width, height, expect_frames)?;
+    let mut frames = Vec::with_capacity(expect_frames.min(4096));
     for p in packets {
-        if p.is_empty() {
-            continue;
-        }
-        let pkt = ff::Packet::copy(p);
-        dec.send_packet(&pkt).map_err(ff_err("decode"))?;
-        drain_frames(&mut dec, &mut out, expect_frames)?;
+        frames.extend(dec.push(p)?);
     }
-    dec.send_eof().map_err(ff_err("decode flush"))?;
-    drain_frames(&mut dec, &mut out, expect_frames)?;
-    if out.frames.len() != expect_frames {
+    frames.extend(dec.finish()?);
+    if frames.len() != expect_frames {
         return Err(VideoError::Invalid(format!(
             "HEVC stream gave {} frames, expected {expect_frames}",
-            out.frames.len()
+            frames.len()
         )));
     }
-    Ok(out)
+    Ok(Gray12 {
+        width,
+        height,
+        frames,
+    })
 }
 
-fn drain_frames(
-    dec: &mut ff::decoder::Video,
-    out: &mut Gray12,
+/// An HEVC Main 12 4:0:0 decoder fed one packet at a time: each call returns the pictures it
+/// released (in output order; FFmpeg's frame threads hold a picture back for a packet or
+/// two). Low-delay streams thus give their first pictures without the rest of the stream.
+pub struct Gray12Decoder {
+    dec: ff::decoder::Video,
+    width: u32,
+    height: u32,
     max_frames: usize,
-) -> Result<(), VideoError> {
-    let mut frame = ff::frame::Video::empty();
-    loop {
-        match dec.receive_frame(&mut frame) {
-            Ok(()) => {
-                if frame.format() != Pixel::GRAY12LE
-                    || frame.width() != out.width
-                    || frame.height() != out.height
-                {
-                    return Err(VideoError::Invalid(format!(
-                        "HEVC frame is {:?} {}x{}, expected GRAY12LE {}x{}",
-                        frame.format(),
-                        frame.width(),
-                        frame.height(),
-                        out.width,
-                        out.height
-                    )));
+    /// Pictures returned so far.
+    given: usize,
+}
+
+impl Gray12Decoder {
+    /// A decoder of pictures of `width` x `height`; more than `max_frames` pictures is an error.
+    pub fn new(width: u32, height: u32, max_frames: usize) -> Result<Self, VideoError> {
+        init();
+        let codec =
+            ff::decoder::find(ff::codec::Id::HEVC).ok_or(VideoError::MissingCodec("HEVC"))?;
+        let ctx = ff::codec::context::Context::new_with_codec(codec);
+        // Bound what a hostile bitstream can make FFmpeg allocate: pictures much larger than
+        // the declared size are refused inside FFmpeg (AVCodecContext.max_pixels). The margin
+        // covers the coding-block padding FFmpeg adds before that check.
+        let mut opts = ff::Dictionary::new();
+        let max_pixels = (width as u64 + 128) * (height as u64 + 128);
+        opts.set("max_pixels", &max_pixels.to_string());
+        // Frame and wavefront threads (x265 writes WPP streams); HEVC decoding is bit-exact,
+        // so the thread count cannot change the features.
+        opts.set("threads", "auto");
+        let dec = ctx
+            .decoder()
+            .open_as_with(codec, opts)
+            .and_then(|o| o.video())
+            .map_err(ff_err("decoder setup"))?;
+        Ok(Gray12Decoder {
+            dec,
+            width,
+            height,
+            max_frames,
+            given: 0,
+        })
+    }
+
+    /// Decode one packet (empty packets are skipped); the pictures it released.
+    pub fn push(&mut self, packet: &[u8]) -> Result<Vec<Vec<u16>>, VideoError> {
+        if packet.is_empty() {
+            return Ok(Vec::new());
+        }
+        let pkt = ff::Packet::copy(packet);
+        self.dec.send_packet(&pkt).map_err(ff_err("decode"))?;
+        self.drain()
+    }
+
+    /// End of the stream: the pictures still held.
+    pub fn finish(&mut self) -> Result<Vec<Vec<u16>>, VideoError> {
+        self.dec.send_eof().map_err(ff_err("decode flush"))?;
+        self.drain()
+    }
+
+    fn drain(&mut self) -> Result<Vec<Vec<u16>>, VideoError> {
+        let mut out = Vec::new();
+        let mut frame = ff::frame::Video::empty();
+        loop {
+            match self.dec.receive_frame(&mut frame) {
+                Ok(()) => {
+                    if frame.format() != Pixel::GRAY12LE
+                        || frame.width() != self.width
+                        || frame.height() != self.height
+                    {
+                        return Err(VideoError::Invalid(format!(
+                            "HEVC frame is {:?} {}x{}, expected GRAY12LE {}x{}",
+                            frame.format(),
+                            frame.width(),
+                            frame.height(),
+                            self.width,
+                            self.height
+                        )));
+                    }
+                    if self.given >= self.max_frames {
+                        return Err(VideoError::Invalid(format!(
+                            "HEVC stream has more than {} frames",
+                            self.max_frames
+                        )));
+                    }
+                    let (w, h) = (self.width as usize, self.height as usize);
+                    let stride = frame.stride(0);
+                    let data = frame.data(0);
+                    let mut img = Vec::with_capacity(w * h);
+                    for y in 0..h {
+                        let row = &data[y * stride..y * stride + 2 * w];
+                        img.extend(
+                            row.chunks_exact(2)
+                                .map(|b| u16::from_le_bytes([b[0], b[1]]).min(4095)),
+                        );
+                    }
+                    self.given += 1;
+                    out.push(img);
                 }
-                if out.frames.len() >= max_frames {
-                    return Err(VideoError::Invalid(format!(
-                        "HEVC stream has more than {max_frames} frames"
-                    )));
+                Err(ff::Error::Other { errno }) if errno == ff::util::error::EAGAIN => {
+                    return Ok(out)
                 }
-                let (w, h) = (out.width as usize, out.height as usize);
-                let stride = frame.stride(0);
-                let data = frame.data(0);
-                let mut img = Vec::with_capacity(w * h);
-                for y in 0..h {
-                    let row = &data[y * stride..y * stride + 2 * w];
-                    img.extend(
-                        row.chunks_exact(2)
-                            .map(|b| u16::from_le_bytes([b[0], b[1]]).min(4095)),
-                    );
-                }
-                out.frames.push(img);
+                Err(ff::Error::Eof) => return Ok(out),
+                Err(e) => return Err(ff_err("decode")(e)),
             }
-            Err(ff::Error::Other { errno }) if errno == ff::util::error::EAGAIN => return Ok(()),
-            Err(ff::Error::Eof) => return Ok(()),
-            Err(e) => return Err(ff_err("decode")(e)),
         }
     }
 }

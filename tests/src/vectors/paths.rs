@@ -147,6 +147,8 @@ fn small_dynamic(
 fn hevc() -> dlgs_encoder::FeatureCodec {
     dlgs_encoder::FeatureCodec::Hevc(dlgs_encoder::HevcSettings {
         preset: "ultrafast".into(),
+        // The vectors' streams predate low-delay GOP 0 streams (and keep their B-frames).
+        low_delay: dlgs_encoder::LowDelay::Off,
         ..Default::default()
     })
 }
