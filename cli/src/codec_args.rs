@@ -12,7 +12,7 @@ use dlgs::chunks::mlpw::WeightType;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::residual::{AttrGroup, DeltaTarget};
 use dlgs_encoder::{
-    CanonicalCodec, EncoderConfig, FeatureCodec, HevcSettings, LowDelay, ResidualConfig, SortSpec,
+    CanonicalCodec, EncoderConfig, FastStart, FeatureCodec, HevcSettings, ResidualConfig, SortSpec,
 };
 
 /// Encoder settings shared by `encode`, `synth`, `ingest` and `rd`.
@@ -223,18 +223,18 @@ pub struct CodecArgs {
         long
     )]
     pub intra_features: bool,
-    /// Which GOPs' time-feature streams are coded without B-frames, so that their first
-    /// pictures decode from their first packets: `first` (default: playback starts after 2 of
-    /// GOP 0's 7 key pictures), `all` (cold seeks also decode only the pictures up to t), or
-    /// `off`. Costs about 14 % of such a GOP's time-feature bytes at the same PSNR
-    /// (docs/benchmarks/dynamic.md).
+    /// Which GOPs' time-feature streams start with their first key interval (their second
+    /// picture forced to P, coded second), so that it decodes from their first 2 packets:
+    /// `first` (default: playback starts after 2 of GOP 0's 7 key pictures), `all` (cold
+    /// seeks into a GOP's first interval too), or `off`. About +0.1 % bytes on the real
+    /// 200-frame sequence (docs/benchmarks/dynamic.md "Fast start").
     #[arg(
         help_heading = "Dynamic streams: time features, decoders and residuals",
         long,
         default_value = "first",
         value_parser = ["first", "all", "off"]
     )]
-    pub low_delay_features: String,
+    pub fast_start: String,
     /// Store time features as exact f32 (zstd) instead of HEVC.
     #[arg(
         help_heading = "Dynamic streams: time features, decoders and residuals",
@@ -558,10 +558,10 @@ impl CodecArgs {
                         preset: self.preset.clone(),
                         lossless: self.lossless_features,
                         intra_only: self.intra_features,
-                        low_delay: match self.low_delay_features.as_str() {
-                            "all" => LowDelay::EveryGop,
-                            "off" => LowDelay::Off,
-                            _ => LowDelay::FirstGop,
+                        fast_start: match self.fast_start.as_str() {
+                            "all" => FastStart::EveryGop,
+                            "off" => FastStart::Off,
+                            _ => FastStart::FirstGop,
                         },
                     })
                 },

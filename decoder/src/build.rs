@@ -10,8 +10,8 @@ use dlgs::model::DeformMlps;
 use dlgs::{Error, FormatErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
-use crate::low_delay::{Dequantise, LowDelayKeys};
 use crate::planar::{KeySource, PlanarFeatures};
+use crate::prefix_keys::{Dequantise, PrefixKeys};
 use crate::{DecodedGop, Deformer, State};
 
 fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
@@ -191,12 +191,13 @@ pub(crate) fn decode_time_features(
             packets,
             ..
         } => {
-            // Low-delay streams decode the keys a frame needs from a prefix, when first needed.
+            // Streams whose output order can be read decode the keys a frame needs, when first
+            // needed, from a prefix.
             let dequantise = match reference {
                 Some(range) => Dequantise::Reference(range),
                 None => Dequantise::Ranges(ranges.clone()),
             };
-            let packets = match LowDelayKeys::new(tiling, dequantise, packets, at, hevc.cloned()) {
+            let packets = match PrefixKeys::new(tiling, dequantise, packets, at, hevc.cloned()) {
                 Ok(keys) => {
                     return Ok(PlanarFeatures::per_key(
                         tiling.n,

@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-pub use crate::low_delay::pictures_in_decode_order;
+pub use crate::hevc_headers::display_order;
 
 /// Decodes HEVC Main 12 4:0:0 access units into 12-bit gray pictures.
 ///

@@ -6,12 +6,13 @@
 mod build;
 pub mod deform;
 pub mod hevc;
+mod hevc_headers;
 pub mod interp;
-mod low_delay;
 mod lru;
 pub mod panel;
 pub mod pipeline;
 pub mod planar;
+mod prefix_keys;
 mod read_ahead;
 pub mod scaffold;
 pub mod stream;

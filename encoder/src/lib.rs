@@ -29,7 +29,7 @@ pub use config::{
     DynamicSettings, EncoderConfig, FeatureCodec, GopCanonical, LanguageSettings, RefitSettings,
     ResidualConfig, SortSpec, StillTools,
 };
-pub use dlgs_video::{HevcSettings, LowDelay};
+pub use dlgs_video::{FastStart, HevcSettings};
 pub use refit_stage::RefitReport;
 pub use still::{encode_still, encode_still_reporting, prepare_still, StillReport};
 pub use stream::StreamEncoder;

@@ -43,39 +43,38 @@ pub struct HevcSettings {
     /// Every picture an IDR picture with its own VPS/SPS/PPS, one packet each, so any picture
     /// decodes alone (a seek decodes the 2 keys it needs instead of the GOP's 7).
     pub intra_only: bool,
-    /// Which GOPs' streams are coded without B-frames (see [`LowDelay`]).
-    pub low_delay: LowDelay,
+    /// Which GOPs' streams start with their first key interval (see [`FastStart`]).
+    pub fast_start: FastStart,
 }
 
-/// Streams coded without B-frames ("low delay": `sps_max_num_reorder_pics` 0, pictures in
-/// decode order), so a decoder gets the first pictures from the first packets alone: playback
-/// starts after the first key interval's 2 pictures instead of the GOP's 7, and a seek decodes
-/// only the pictures up to the keys it needs. They cost bytes: at crf 6 on the plant, +20.6 %
-/// `TFEA` bytes at +1 dB, +13.8 % at crf 7 for the same PSNR (docs/benchmarks/dynamic.md).
+/// Streams whose second picture is forced to a P picture, coded right after the first: a GOP's
+/// first key interval (keys 0 and 1) then decodes from its first 2 packets, so playback starts
+/// after 2 of the GOP's 7 pictures; the rest keep x265's B-frames. The cost, on the real
+/// 200-frame sequence, +0.1 % bytes (docs/benchmarks/dynamic.md "Fast start").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LowDelay {
-    /// B-frames everywhere (x265's default structure).
+pub enum FastStart {
+    /// x265's own picture types everywhere.
     Off,
     /// The first GOP only, where playback starts (the default).
     #[default]
     FirstGop,
-    /// Every GOP (faster cold seeks into one-stream features).
+    /// Every GOP.
     EveryGop,
 }
 
 impl HevcSettings {
-    /// The settings of GOP `g`'s stream: `low_delay` resolved to on (`EveryGop`) or `Off`.
+    /// The settings of GOP `g`'s stream: `fast_start` resolved to on (`EveryGop`) or `Off`.
     pub fn for_gop(&self, g: u32) -> HevcSettings {
-        let on = match self.low_delay {
-            LowDelay::Off => false,
-            LowDelay::FirstGop => g == 0,
-            LowDelay::EveryGop => true,
+        let on = match self.fast_start {
+            FastStart::Off => false,
+            FastStart::FirstGop => g == 0,
+            FastStart::EveryGop => true,
         };
         HevcSettings {
-            low_delay: if on {
-                LowDelay::EveryGop
+            fast_start: if on {
+                FastStart::EveryGop
             } else {
-                LowDelay::Off
+                FastStart::Off
             },
             ..self.clone()
         }
@@ -89,7 +88,7 @@ impl Default for HevcSettings {
             preset: "medium".into(),
             lossless: false,
             intra_only: false,
-            low_delay: LowDelay::default(),
+            fast_start: FastStart::default(),
         }
     }
 }
@@ -130,8 +129,9 @@ fn init() {
 }
 
 /// Encode `video` as HEVC Main 12 monochrome; returns the packets in decode order, each a
-/// self-contained Annex B access unit (the first carries VPS/SPS/PPS). The stream has no
-/// B-frames unless `s.low_delay` is `Off` (resolve it per GOP with [`HevcSettings::for_gop`]).
+/// self-contained Annex B access unit (the first carries VPS/SPS/PPS). Unless `s.fast_start`
+/// is `Off` (resolve it per GOP with [`HevcSettings::for_gop`]), the second picture is a P
+/// picture coded second.
 pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, VideoError> {
     init();
     let (w, h) = (video.width, video.height);
@@ -164,9 +164,6 @@ pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, V
     } else {
         opts.set("crf", &s.crf.to_string());
     }
-    if s.low_delay != LowDelay::Off {
-        params.push_str(":bframes=0");
-    }
     if s.intra_only {
         params.push_str(":keyint=1:min-keyint=1:open-gop=0:repeat-headers=1:bframes=0");
     }
@@ -192,6 +189,13 @@ pub fn encode_gray12(video: &Gray12, s: &HevcSettings) -> Result<Vec<Vec<u8>>, V
             }
         }
         frame.set_pts(Some(i as i64));
+        // libx265 takes a frame's picture type as a forced slice type.
+        let fast = s.fast_start != FastStart::Off && !s.intra_only && i == 1;
+        frame.set_kind(if fast {
+            ff::picture::Type::P
+        } else {
+            ff::picture::Type::None
+        });
         enc.send_frame(&frame).map_err(ff_err("encode"))?;
         drain_packets(&mut enc, &mut packets)?;
     }

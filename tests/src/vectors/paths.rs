@@ -147,8 +147,8 @@ fn small_dynamic(
 fn hevc() -> dlgs_encoder::FeatureCodec {
     dlgs_encoder::FeatureCodec::Hevc(dlgs_encoder::HevcSettings {
         preset: "ultrafast".into(),
-        // The vectors' streams predate low-delay GOP 0 streams (and keep their B-frames).
-        low_delay: dlgs_encoder::LowDelay::Off,
+        // The vectors' streams predate fast-start GOP 0 streams (x265's own picture types).
+        fast_start: dlgs_encoder::FastStart::Off,
         ..Default::default()
     })
 }

@@ -1,7 +1,8 @@
-//! Low-delay time-feature streams (issue 55, `decoder/src/low_delay.rs`): a GOP whose HEVC
-//! stream has no B-frames decodes only the key pictures a frame needs, yet every key is the
-//! sample-for-sample value of decoding the whole stream, whichever order frames are asked in,
-//! on any thread count, with FFmpeg's packet-at-a-time decoder or a plugged-in whole-stream one.
+//! Fast-start time-feature streams and keys decoded from stream prefixes (issue 55,
+//! `decoder/src/prefix_keys.rs`, `hevc_headers.rs`): a GOP decodes only the packets up to the
+//! key pictures a frame needs, yet every key is the sample-for-sample value of decoding the
+//! whole stream, whichever order frames are asked in, on any thread count, with FFmpeg's
+//! packet-at-a-time decoder or a plugged-in whole-stream one.
 //!
 //! NOTE: no real trained DLGStream model exists in this repository's data. The models here are
 //! built by `dlgs_testkit::synth` from a REAL canonical scene in ../shared/data with a synthetic
@@ -14,15 +15,15 @@ use dlgs::chunks::tfea::{self, TfeaBody};
 use dlgs::container::{ChunkType, FileReader};
 use dlgs::model::TimeFeatures;
 use dlgs::{FormatErrorKind, Limits};
-use dlgs_decoder::hevc::{pictures_in_decode_order, Ffmpeg, KeyPictureDecoder};
+use dlgs_decoder::hevc::{display_order, Ffmpeg, KeyPictureDecoder};
 use dlgs_decoder::{DecodedGop, Decoder, FrameOptions};
-use dlgs_encoder::{EncoderConfig, FeatureCodec, HevcSettings, LowDelay};
+use dlgs_encoder::{EncoderConfig, FastStart, FeatureCodec, HevcSettings};
 use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
 use dlgs_tests::{load, on_threads};
 
 const SCENE: &str = "ply/gs3d-fork_lod3_tile_0_1971_sh3.ply";
 
-fn file(low_delay: LowDelay) -> Vec<u8> {
+fn file(fast_start: FastStart) -> Vec<u8> {
     let spec = SynthSpec {
         gops: 2,
         language: true,
@@ -33,7 +34,7 @@ fn file(low_delay: LowDelay) -> Vec<u8> {
         dynamic: dlgs_encoder::DynamicSettings {
             features: FeatureCodec::Hevc(HevcSettings {
                 preset: "ultrafast".into(),
-                low_delay,
+                fast_start,
                 ..Default::default()
             }),
             ..Default::default()
@@ -83,12 +84,22 @@ impl KeyPictureDecoder for WholeOnly {
 }
 
 #[test]
-fn low_delay_gops_decode_only_the_keys_asked_for_and_every_key_is_the_whole_streams() {
-    let bytes = file(LowDelay::FirstGop);
+fn keys_decode_from_prefixes_and_every_key_is_the_whole_streams() {
+    let bytes = file(FastStart::FirstGop);
     let (packets0, whole0) = whole_stream(&bytes, 0);
     let (packets1, whole1) = whole_stream(&bytes, 1);
-    assert!(pictures_in_decode_order(&packets0), "GOP 0 has no B-frames");
-    assert!(!pictures_in_decode_order(&packets1), "GOP 1 keeps them");
+    let order0 = display_order(&packets0).expect("readable headers");
+    assert_eq!(
+        order0[..2],
+        [0, 1],
+        "GOP 0 starts with its first key interval"
+    );
+    let order1 = display_order(&packets1).expect("readable headers");
+    assert_ne!(
+        order1,
+        (0..7).collect::<Vec<_>>(),
+        "GOP 1 keeps x265's B-frames"
+    );
     let fps = 30.0;
     for plugged in [false, true] {
         for threads in [1, 2] {
@@ -97,7 +108,7 @@ fn low_delay_gops_decode_only_the_keys_asked_for_and_every_key_is_the_whole_stre
                 if plugged {
                     d.set_key_picture_decoder(Arc::new(WholeOnly));
                 }
-                // A frame of the first key interval decodes keys 0 and 1 of GOP 0's 7.
+                // A frame of the first key interval decodes GOP 0's first 2 packets only.
                 d.frame_at(3.0 / fps, &OPTS).unwrap();
                 let gop = d.gop(0).unwrap();
                 let deformer = gop.deformer.as_ref().unwrap();
@@ -106,11 +117,13 @@ fn low_delay_gops_decode_only_the_keys_asked_for_and_every_key_is_the_whole_stre
                 d.frame_at(45.0 / fps, &OPTS).unwrap();
                 d.frame_at(15.0 / fps, &OPTS).unwrap();
                 assert_eq!(deformer.dynamic_gop().unwrap().features, whole0);
-                // GOP 1 (B-frames) decodes whole, as before.
-                d.frame_at(70.0 / fps, &OPTS).unwrap();
+                // GOP 1 at its last interval: the packets up to keys 5 and 6 only.
+                d.frame_at(115.0 / fps, &OPTS).unwrap();
                 let gop1 = d.gop(1).unwrap();
                 let deformer1 = gop1.deformer.as_ref().unwrap();
-                assert_eq!(deformer1.loaded_keys(), 7);
+                let m = 1 + order1.iter().rposition(|&k| k >= 5).unwrap();
+                assert_eq!(deformer1.loaded_keys(), m, "{order1:?}");
+                d.frame_at(61.0 / fps, &OPTS).unwrap();
                 assert_eq!(deformer1.dynamic_gop().unwrap().features, whole1);
             });
         }
@@ -118,11 +131,14 @@ fn low_delay_gops_decode_only_the_keys_asked_for_and_every_key_is_the_whole_stre
 }
 
 #[test]
-fn low_delay_frames_are_the_frames_of_the_same_stream_with_b_frames_decoded_whole() {
-    // Every GOP low-delay: the streaming pipeline and the random-access decoder agree.
-    let bytes = file(LowDelay::EveryGop);
+fn fast_start_frames_are_the_frames_of_the_random_access_decoder() {
+    // Every GOP fast-start: the streaming pipeline and the random-access decoder agree.
+    let bytes = file(FastStart::EveryGop);
     for g in 0..2 {
-        assert!(pictures_in_decode_order(&whole_stream(&bytes, g).0));
+        assert_eq!(
+            display_order(&whole_stream(&bytes, g).0).unwrap()[..2],
+            [0, 1]
+        );
     }
     let mut d = Decoder::new(Cursor::new(&bytes[..]), Limits::default()).unwrap();
     let scene = d.scene().clone();
@@ -148,7 +164,7 @@ fn low_delay_frames_are_the_frames_of_the_same_stream_with_b_frames_decoded_whol
 /// A plugged-in decoder whose pictures are wrong fails the frame with a typed error of the
 /// `TFEA` payload, again on the next request, never a panic.
 #[test]
-fn a_broken_decoder_on_a_low_delay_stream_is_a_payload_error_every_time() {
+fn a_broken_decoder_on_a_prefix_is_a_payload_error_every_time() {
     struct Short;
     impl KeyPictureDecoder for Short {
         fn decode(&self, p: &[&[u8]], w: u32, h: u32, n: usize) -> Result<Vec<Vec<u16>>, String> {
@@ -157,7 +173,7 @@ fn a_broken_decoder_on_a_low_delay_stream_is_a_payload_error_every_time() {
             Ok(v)
         }
     }
-    let bytes = file(LowDelay::FirstGop);
+    let bytes = file(FastStart::FirstGop);
     let mut d = Decoder::new(Cursor::new(&bytes[..]), Limits::default()).unwrap();
     d.set_key_picture_decoder(Arc::new(Short));
     for t in [0.1, 1.5] {
