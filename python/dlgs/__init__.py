@@ -125,12 +125,13 @@ if HAS_HEVC:
             lang_decoder: Optional[Union[str, os.PathLike]] = None,
             negatives: Any = None,
             progress: Optional[Callable[[int, int], Any]] = None,
+            fast_start: str = "first",
         ) -> None:
             self._w = _dlgs.Writer(
                 path, fps, gop_length, quality, crf, preset, exact_features, lossless_features,
                 intra_features, per_gop_range, mlp_f16, zstd_level, residual_mode, deform_model,
                 gop_count, frame_count, meta, lang_decoder,
-                None if negatives is None else _f32(negatives), progress,
+                None if negatives is None else _f32(negatives), progress, fast_start,
             )
 
         def write_gop(

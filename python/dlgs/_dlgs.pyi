@@ -99,8 +99,8 @@ class Writer:
                  intra_features: bool, per_gop_range: bool, mlp_f16: bool, zstd_level: int,
                  residual_mode: str, deform_model: str, gop_count: Optional[int],
                  frame_count: Optional[int], meta: Any, lang_decoder: Optional[PathLike],
-                 negatives: Optional[F32], progress: Optional[Callable[[int, int], Any]]
-                 ) -> None: ...
+                 negatives: Optional[F32], progress: Optional[Callable[[int, int], Any]],
+                 fast_start: str = "first") -> None: ...
     def write_gop(self, static_set: Optional[Frame] = None, dynamic: Optional[Frame] = None,
                   time_features: Optional[F32] = None,
                   decoders: Optional[Mapping[str, Sequence[F32]]] = None,

@@ -6,8 +6,8 @@ use dlgs::chunks::csog::QuantBits;
 use dlgs::chunks::mlpw::WeightType;
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs_encoder::{
-    CanonicalCodec, CanonicalSettings, DynamicSettings, EncoderConfig, FeatureCodec, HevcSettings,
-    ResidualConfig, SortSpec,
+    CanonicalCodec, CanonicalSettings, DynamicSettings, EncoderConfig, FastStart, FeatureCodec,
+    HevcSettings, ResidualConfig, SortSpec,
 };
 
 use crate::errors::{request, Res};
@@ -21,6 +21,7 @@ pub struct CodecOptions {
     pub exact_features: bool,
     pub lossless_features: bool,
     pub intra_features: bool,
+    pub fast_start: FastStart,
     pub per_gop_range: bool,
     pub mlp_f16: bool,
     pub zstd_level: i32,
@@ -70,7 +71,7 @@ impl CodecOptions {
                         preset: self.preset.clone(),
                         lossless: self.lossless_features,
                         intra_only: self.intra_features,
-                        ..Default::default()
+                        fast_start: self.fast_start,
                     })
                 },
                 per_gop_range: self.per_gop_range,
@@ -148,4 +149,14 @@ pub fn fps_fraction(fps: f64) -> Res<(u32, u32)> {
         return Ok((ntsc.round() as u32, 1001));
     }
     Ok(((fps * 1000.0).round() as u32, 1000))
+}
+
+/// `fast_start` as the CLI's `--fast-start` spells it.
+pub fn parse_fast_start(s: &str) -> Res<FastStart> {
+    Ok(match s {
+        "first" => FastStart::FirstGop,
+        "all" => FastStart::EveryGop,
+        "off" => FastStart::Off,
+        _ => return Err(request(format!("fast_start `{s}`: first, all or off"))),
+    })
 }

@@ -57,6 +57,7 @@ fn encode_scene(
         exact_features: false,
         lossless_features: false,
         intra_features: false,
+        fast_start: Default::default(),
         per_gop_range: false,
         mlp_f16: false,
         zstd_level,

@@ -207,7 +207,7 @@ impl Writer {
         exact_features=false, lossless_features=false, intra_features=false, per_gop_range=false,
         mlp_f16=false, zstd_level=9, residual_mode="intra", deform_model="reference",
         gop_count=None, frame_count=None, meta=None, lang_decoder=None, negatives=None,
-        progress=None))]
+        progress=None, fast_start="first"))]
     fn py_new(
         py: Python<'_>,
         path: PathBuf,
@@ -230,6 +230,7 @@ impl Writer {
         lang_decoder: Option<PathBuf>,
         negatives: Option<&Bound<'_, PyAny>>,
         progress: Option<PyObject>,
+        fast_start: &str,
     ) -> Res<Self> {
         let codec = CodecOptions {
             quality: quality.to_owned(),
@@ -238,6 +239,7 @@ impl Writer {
             exact_features,
             lossless_features,
             intra_features,
+            fast_start: crate::config::parse_fast_start(fast_start)?,
             per_gop_range,
             mlp_f16,
             zstd_level,

@@ -81,22 +81,30 @@ def test_dynamic_round_trip_exact(dyn_exact, work):
     assert out.read_bytes() == cli_out.read_bytes()
 
 
-def test_dynamic_hevc_same_bytes_as_cli(dyn_exact, work):
-    """crf 6 HEVC time features, streamed (gop_count given): the CLI's bytes."""
+@pytest.mark.parametrize("fast_start", ["first", "off"])
+def test_dynamic_hevc_same_bytes_as_cli(dyn_exact, work, fast_start):
+    """crf 6 HEVC time features, streamed (gop_count given): the CLI's bytes, with the
+    default fast start and without."""
     src = dlgs.open(dyn_exact)
     info = src.info
-    out = work / "rewritten_hevc.dlgs"
+    out = work / f"rewritten_hevc_{fast_start}.dlgs"
     w = dlgs.Writer(out, fps=info["fps"], gop_length=info["gop_length"], crf=6,
-                    gop_count=info["gop_count"])
+                    gop_count=info["gop_count"], fast_start=fast_start)
     for g in range(info["gop_count"]):
         d = src.gop(g)
         w.write_gop(d["static"], d["dynamic"], d["time_features"], d["decoders"], d["scale_offsets"])
         assert not out.exists()
     size = w.close()
-    cli_out = work / "cli_hevc.dlgs"
-    run_cli("encode", dyn_exact, "-o", cli_out, "--crf", 6, "--no-meta")
+    cli_out = work / f"cli_hevc_{fast_start}.dlgs"
+    run_cli("encode", dyn_exact, "-o", cli_out, "--crf", 6, "--no-meta",
+            "--fast-start", fast_start)
     assert size == cli_out.stat().st_size
     assert out.read_bytes() == cli_out.read_bytes()
+
+
+def test_fast_start_option_is_checked(work):
+    with pytest.raises(dlgs.RequestError, match="fast_start"):
+        dlgs.Writer(work / "x.dlgs", fast_start="sometimes")
 
 
 def test_writer_refuses_bad_input(work):
