@@ -194,14 +194,16 @@ impl<R: Read + Seek> Decoder<R> {
         chunks.iter().find(|c| c.ty == ty).copied()
     }
 
-    /// Decode GOP `g`: canonical Gaussians, time features and decoders (cached). Intra-only
-    /// time features (`TFEA` codec 3) decode each key when a frame first needs it.
+    /// Decode GOP `g`: canonical Gaussians, time features and decoders (cached). HEVC time
+    /// features decode the keys a frame needs when it first needs them: intra-only features
+    /// (`TFEA` codec 3) those keys alone, one-stream features whose output order can be read
+    /// the packets up to them (format-spec §6.2, "Decoding a prefix"); other streams whole.
     pub fn gop(&mut self, g: u32) -> Result<Arc<DecodedGop>> {
         self.gop_for_keys(g, 0..0)
     }
 
     /// [`Self::gop`], decoding the time-feature keys of `keys` alongside the canonical state
-    /// (all keys are decoded anyway unless the features are intra-only).
+    /// (all keys are decoded anyway when the features decode only whole).
     fn gop_for_keys(&mut self, g: u32, keys: std::ops::Range<usize>) -> Result<Arc<DecodedGop>> {
         if let Some(c) = self.gops.get(g) {
             return Ok(c);
