@@ -156,7 +156,8 @@ pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
             for key in chunk {
                 let k = (*key & 0xffff_ffff) as u32;
                 let s = &splats[k as usize];
-                for ty in s.tiles[1]..s.tiles[3] {
+                let [_, ty0, _, ty1] = s.tiles();
+                for ty in ty0..ty1 {
                     let (a, b) = band_tiles(s, ty as u32);
                     if a < b {
                         rows[ty as usize].push((k, a as u16, b as u16));
@@ -190,7 +191,7 @@ pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
 /// centres is found in closed form (left edge convex, right edge concave in dy), widened by
 /// one pixel like the per-row span in `composite`.
 fn band_tiles(s: &Splat2d, ty: u32) -> (usize, usize) {
-    let (t0, t1) = (s.tiles[0] as usize, s.tiles[2] as usize);
+    let [t0, _, t1, _] = s.tiles().map(usize::from);
     let [ca, cb, cc] = s.conic;
     let det = ca * cc - cb * cb;
     if !(det > 0.0) {
