@@ -278,6 +278,8 @@ fn splat_on_tile<const LANG: bool, const FAST: bool>(
         }
         return;
     }
+    // Fast: the span's terms set once per splat and tile, a multiplication for the divisions.
+    let (inv_a, det, ar2) = (1.0 / ca, ca * cc - cbk * cbk, ca * s.r2);
     for ly in ya..yb {
         let r = ly as usize;
         if !acc.row_live[r] {
@@ -286,13 +288,22 @@ fn splat_on_tile<const LANG: bool, const FAST: bool>(
         let dy = (y0 + ly) as f32 - s.mean[1];
         // Exact span of this row inside the ellipse A dx^2 + 2B dx dy + C dy^2 <= r2, widened by
         // one pixel against rounding; outside it alpha < 1/255 so nothing would be added.
-        let disc = cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2);
+        let disc = if FAST {
+            ar2 - det * dy * dy
+        } else {
+            cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2)
+        };
         if !(disc >= 0.0) {
             continue;
         }
         let sq = disc.sqrt();
-        let xa = ((cx + (-cbk * dy - sq) / ca).floor() - 1.0).max(xa0);
-        let xb = ((cx + (-cbk * dy + sq) / ca).ceil() + 2.0).min(xb0);
+        let (l, rt) = if FAST {
+            ((-cbk * dy - sq) * inv_a, (-cbk * dy + sq) * inv_a)
+        } else {
+            ((-cbk * dy - sq) / ca, (-cbk * dy + sq) / ca)
+        };
+        let xa = ((cx + l).floor() - 1.0).max(xa0);
+        let xb = ((cx + rt).ceil() + 2.0).min(xb0);
         if !(xa < xb) {
             continue;
         }
