@@ -156,7 +156,7 @@ enum Cmd {
         /// into the view (the same image, more time; docs/benchmarks/scaffold.md).
         #[arg(long)]
         no_cull: bool,
-        /// Fast compositing (`Accuracy::Fast`): about 10-15 % less render time, pixels within
+        /// Fast compositing (`Accuracy::Fast`): about 15-20 % less render time, pixels within
         /// 60 dB PSNR of the exact renderer (docs/benchmarks/render.md); default exact.
         #[arg(long)]
         fast_render: bool,
@@ -177,7 +177,7 @@ enum Cmd {
         /// Write per-view error images (mean |A-B| over RGB, x4 gain) here.
         #[arg(long)]
         error_dir: Option<PathBuf>,
-        /// Fast compositing (`Accuracy::Fast`): about 10-15 % less render time, pixels within
+        /// Fast compositing (`Accuracy::Fast`): about 15-20 % less render time, pixels within
         /// 60 dB PSNR of the exact renderer (docs/benchmarks/render.md); default exact.
         #[arg(long)]
         fast_render: bool,

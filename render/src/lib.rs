@@ -33,7 +33,8 @@ pub enum Accuracy {
     Exact,
     /// Cheaper per-pixel work that moves pixels slightly: the Gaussian's exponent as a
     /// polynomial in the pixel's x with base-2 coefficients set once per row, a degree-3 `2^x`
-    /// (relative error < 1e-4) instead of the degree-6 `exp`, no per-lane span mask, and a
+    /// (relative error < 1e-4) instead of the degree-6 `exp`, no per-lane span mask (the row span
+    /// only picks half or whole rows, multiplied by 1/A instead of two divisions), and a
     /// pixel finished once its transmittance would fall below 1e-3 (exact: 1e-4). At least
     /// 60 dB PSNR against [`Accuracy::Exact`] on the plant (`tests/fast_render.rs`: 72.6 dB
     /// colour); still bit-identical on any thread count.
