@@ -53,6 +53,10 @@ pub struct RdArgs {
     /// Only redraw the plots from OUTPUT/rd.csv (no encoding).
     #[arg(long)]
     pub plot_only: bool,
+    /// Render reference and decoded frames with the fast compositor (`Accuracy::Fast`, within
+    /// 60 dB PSNR of the exact renderer); default exact.
+    #[arg(long)]
+    pub fast_render: bool,
 }
 
 #[derive(Parser)]
@@ -172,9 +176,11 @@ pub(crate) fn renders(
     times: &[f64],
     cams: &[Camera],
     language: bool,
+    fast_render: bool,
 ) -> Result<Vec<dlgs_render::Image>> {
     let opts = RenderOptions {
         features: language,
+        accuracy: crate::accuracy(fast_render),
         ..RenderOptions::default()
     };
     let mut out = Vec::new();
@@ -277,7 +283,7 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
     let mut reference = Source::open(&a.model)?;
     let cams = a.cams.resolve(&reference.canonical(0.0)?)?;
     let times = sample_times(&reference, a.times);
-    let ref_images = renders(&mut reference, &times, &cams, false)?;
+    let ref_images = renders(&mut reference, &times, &cams, false, a.fast_render)?;
 
     let bar = indicatif::ProgressBar::new(settings.len() as u64);
     bar.set_style(
@@ -294,7 +300,7 @@ pub fn run_rd(a: &RdArgs) -> Result<()> {
         let bytes = std::fs::metadata(&tmp)?.len();
         let decode_ms_per_frame = decode_ms_per_frame(&tmp)?;
         let mut test = Source::open(&tmp)?;
-        let images = renders(&mut test, &times, &cams, false)?;
+        let images = renders(&mut test, &times, &cams, false, a.fast_render)?;
         let (mut psnr, mut ssim) = (0.0, 0.0);
         for (r, t) in ref_images.iter().zip(&images) {
             psnr += metrics::psnr(&r.color, &t.color);

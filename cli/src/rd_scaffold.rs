@@ -102,7 +102,7 @@ pub fn run(a: &RdArgs) -> Result<()> {
     let cams = a.cams.resolve(&reference.canonical(0.0)?)?;
     let times = sample_times(&reference, a.times);
     let language = reference.language_shape().is_some();
-    let ref_images = renders(&mut reference, &times, &cams, language)?;
+    let ref_images = renders(&mut reference, &times, &cams, language, a.fast_render)?;
     let peak = feature_peak(&ref_images);
 
     let bar = indicatif::ProgressBar::new(ks.len() as u64);
@@ -127,7 +127,7 @@ pub fn run(a: &RdArgs) -> Result<()> {
         let decode_ms_per_frame = decode_ms_per_frame(&tmp, &cams)?;
         let mut test = Source::open(&tmp)?;
         let frames = test.timing().map_or(1, |(_, n)| n.max(1));
-        let images = renders(&mut test, &times, &cams, language)?;
+        let images = renders(&mut test, &times, &cams, language, a.fast_render)?;
         let (mut psnr, mut ssim, mut lang) = (0.0, 0.0, 0.0);
         for (r, t) in ref_images.iter().zip(&images) {
             psnr += metrics::psnr(&r.color, &t.color);

@@ -338,6 +338,7 @@ fn check(
     let opts = RenderOptions {
         background: [1.0, 1.0, 1.0],
         features: false,
+        ..Default::default()
     };
     let pb = bar(files.len(), "checking frames");
     let mut per_frame = Vec::with_capacity(files.len());

@@ -146,6 +146,7 @@ pub fn compare<'py>(
     let opts = dlgs_render::RenderOptions {
         background: [background.0, background.1, background.2],
         features: false,
+        ..Default::default()
     };
     let views = PyList::empty(py);
     let (mut sp, mut ss) = (0.0, 0.0);

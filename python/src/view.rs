@@ -39,6 +39,7 @@ pub fn render_arrays(
         &RenderOptions {
             background,
             features,
+            ..Default::default()
         },
     )
     .map_err(other)?;

@@ -214,6 +214,7 @@ pub fn fit_colour_offsets(
             &crate::RenderOptions {
                 background,
                 features: false,
+                ..Default::default()
             },
         )
         .expect("renderable camera");
@@ -335,6 +336,7 @@ pub fn snap_colour_offsets(
     let opts = crate::RenderOptions {
         background,
         features: false,
+        ..Default::default()
     };
     // b = target - current render, per view.
     let base: Vec<Vec<f32>> = cams

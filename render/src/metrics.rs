@@ -19,6 +19,26 @@ pub fn psnr(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
+/// PSNR in dB of `b` against the reference `a` for values of any range (language features):
+/// no clamping, the peak is `a`'s range (max - min); `f64::INFINITY` for identical buffers.
+pub fn psnr_range(a: &[f32], b: &[f32]) -> f64 {
+    assert_eq!(a.len(), b.len(), "PSNR of buffers of different sizes");
+    let (lo, hi) = a.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| {
+        (lo.min(v as f64), hi.max(v as f64))
+    });
+    let mse: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+        .sum::<f64>()
+        / a.len().max(1) as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * ((hi - lo).max(f64::MIN_POSITIVE).powi(2) / mse).log10()
+    }
+}
+
 fn gaussian_window() -> [f64; 11] {
     let mut w = [0f64; 11];
     for (i, v) in w.iter_mut().enumerate() {

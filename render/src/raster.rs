@@ -6,13 +6,19 @@
 //! The language image uses the language opacity with its own transmittance `Tl` and the same
 //! per-Gaussian rule (skip if its own alpha < 1/255), and stops where the colour stops:
 //! the paper's "colour transparency accumulation truncation".
+//!
+//! That is [`Accuracy::Exact`], bit for bit. [`Accuracy::Fast`] approximates it (see there):
+//! `exp` by a cheaper `2^x`, and a pixel finishes at `T' < 1e-3`.
 
 use rayon::prelude::*;
 
-use crate::fastexp::exp_neg;
+use crate::fastexp::{exp2_neg_fast, exp_neg};
 use crate::project::{Splat2d, ALPHA_MIN, TILE};
+use crate::Accuracy;
 
 pub const T_MIN: f32 = 1e-4;
+/// The fast knob's termination threshold.
+pub const T_MIN_FAST: f32 = 1e-3;
 pub const ALPHA_MAX: f32 = 0.99;
 const TP: usize = (TILE * TILE) as usize;
 
@@ -31,7 +37,7 @@ pub struct Accum {
     pub pairs: usize,
 }
 
-/// Bin splats into tiles (depth order) and composite every tile.
+/// Bin splats into tiles (depth order) and composite every tile, exactly.
 /// `lang` holds the source Gaussians' language features when the language image is wanted.
 pub fn rasterize(
     splats: &[Splat2d],
@@ -40,6 +46,19 @@ pub fn rasterize(
     background: [f32; 3],
     lang: Option<(&[f32], usize)>,
 ) -> Accum {
+    rasterize_with(splats, width, height, background, lang, Accuracy::Exact)
+}
+
+/// [`rasterize`] with the compositor's accuracy chosen.
+pub fn rasterize_with(
+    splats: &[Splat2d],
+    width: u32,
+    height: u32,
+    background: [f32; 3],
+    lang: Option<(&[f32], usize)>,
+    accuracy: Accuracy,
+) -> Accum {
+    let fast = accuracy == Accuracy::Fast;
     let tiles_x = width.div_ceil(TILE) as usize;
     let tiles_y = height.div_ceil(TILE) as usize;
     let tile_lists = bin_tiles(splats, width, height);
@@ -55,9 +74,11 @@ pub fn rasterize(
             let y0 = ty as u32 * TILE;
             let w = (width - x0).min(TILE);
             let h = (height - y0).min(TILE);
-            match lang {
-                Some(l) => composite::<true>(splats, list, x0, y0, w, h, Some(l)),
-                None => composite::<false>(splats, list, x0, y0, w, h, None),
+            match (lang, fast) {
+                (Some(l), false) => composite::<true, false>(splats, list, x0, y0, w, h, Some(l)),
+                (None, false) => composite::<false, false>(splats, list, x0, y0, w, h, None),
+                (Some(l), true) => composite::<true, true>(splats, list, x0, y0, w, h, Some(l)),
+                (None, true) => composite::<false, true>(splats, list, x0, y0, w, h, None),
             }
         })
         .collect();
@@ -135,7 +156,8 @@ pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
             for key in chunk {
                 let k = (*key & 0xffff_ffff) as u32;
                 let s = &splats[k as usize];
-                for ty in s.tiles[1]..s.tiles[3] {
+                let [_, ty0, _, ty1] = s.tiles();
+                for ty in ty0..ty1 {
                     let (a, b) = band_tiles(s, ty as u32);
                     if a < b {
                         rows[ty as usize].push((k, a as u16, b as u16));
@@ -169,7 +191,7 @@ pub fn bin_tiles(splats: &[Splat2d], width: u32, height: u32) -> Vec<Vec<u32>> {
 /// centres is found in closed form (left edge convex, right edge concave in dy), widened by
 /// one pixel like the per-row span in `composite`.
 fn band_tiles(s: &Splat2d, ty: u32) -> (usize, usize) {
-    let (t0, t1) = (s.tiles[0] as usize, s.tiles[2] as usize);
+    let [t0, _, t1, _] = s.tiles().map(usize::from);
     let [ca, cb, cc] = s.conic;
     let det = ca * cc - cb * cb;
     if !(det > 0.0) {
@@ -219,7 +241,7 @@ const CHUNK: usize = 16;
 /// Composite one splat over the tile at (x0, y0), size w x h.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn splat_on_tile<const LANG: bool>(
+fn splat_on_tile<const LANG: bool, const FAST: bool>(
     acc: &mut TileAcc,
     s: &Splat2d,
     x0: u32,
@@ -248,14 +270,16 @@ fn splat_on_tile<const LANG: bool>(
             }
             let dy = (y0 + ly) as f32 - s.mean[1];
             if xb0 <= 8.0 {
-                row_span::<8, 0, LANG>(acc, r, s, cx, dy, xa0, xb0, feat)
+                row_span::<8, 0, LANG, FAST>(acc, r, s, cx, dy, xa0, xb0, feat)
             } else {
-                row_span::<8, 8, LANG>(acc, r, s, cx, dy, xa0, xb0, feat)
+                row_span::<8, 8, LANG, FAST>(acc, r, s, cx, dy, xa0, xb0, feat)
             }
             acc.update_row(r);
         }
         return;
     }
+    // Fast: the span's terms set once per splat and tile, a multiplication for the divisions.
+    let (inv_a, det, ar2) = (1.0 / ca, ca * cc - cbk * cbk, ca * s.r2);
     for ly in ya..yb {
         let r = ly as usize;
         if !acc.row_live[r] {
@@ -264,23 +288,32 @@ fn splat_on_tile<const LANG: bool>(
         let dy = (y0 + ly) as f32 - s.mean[1];
         // Exact span of this row inside the ellipse A dx^2 + 2B dx dy + C dy^2 <= r2, widened by
         // one pixel against rounding; outside it alpha < 1/255 so nothing would be added.
-        let disc = cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2);
+        let disc = if FAST {
+            ar2 - det * dy * dy
+        } else {
+            cbk * cbk * dy * dy - ca * (cc * dy * dy - s.r2)
+        };
         if !(disc >= 0.0) {
             continue;
         }
         let sq = disc.sqrt();
-        let xa = ((cx + (-cbk * dy - sq) / ca).floor() - 1.0).max(xa0);
-        let xb = ((cx + (-cbk * dy + sq) / ca).ceil() + 2.0).min(xb0);
+        let (l, rt) = if FAST {
+            ((-cbk * dy - sq) * inv_a, (-cbk * dy + sq) * inv_a)
+        } else {
+            ((-cbk * dy - sq) / ca, (-cbk * dy + sq) / ca)
+        };
+        let xa = ((cx + l).floor() - 1.0).max(xa0);
+        let xb = ((cx + rt).ceil() + 2.0).min(xb0);
         if !(xa < xb) {
             continue;
         }
         // Most splats are a few pixels wide: touch only the half-row they cover.
         if xb <= 8.0 {
-            row_span::<8, 0, LANG>(acc, r, s, cx, dy, xa, xb, feat)
+            row_span::<8, 0, LANG, FAST>(acc, r, s, cx, dy, xa, xb, feat)
         } else if xa >= 8.0 {
-            row_span::<8, 8, LANG>(acc, r, s, cx, dy, xa, xb, feat)
+            row_span::<8, 8, LANG, FAST>(acc, r, s, cx, dy, xa, xb, feat)
         } else {
-            row_span::<16, 0, LANG>(acc, r, s, cx, dy, xa, xb, feat)
+            row_span::<16, 0, LANG, FAST>(acc, r, s, cx, dy, xa, xb, feat)
         }
         acc.update_row(r);
     }
@@ -327,7 +360,7 @@ impl TileAcc {
 /// One Gaussian on one tile row, lanes `[B, B + N)` of the row (N = 8 or 16): the per-pixel
 /// rule of the module comment, written branch-free so it vectorises.
 #[inline(always)]
-fn row_span<const N: usize, const B: usize, const LANG: bool>(
+fn row_span<const N: usize, const B: usize, const LANG: bool, const FAST: bool>(
     acc: &mut TileAcc,
     r: usize,
     s: &Splat2d,
@@ -343,6 +376,11 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
     // power = -0.5 A dx^2 + p1 dx + p0 with the dy terms hoisted out of the lane loop.
     let p0 = -0.5 * cc * dy * dy;
     let p1 = -cbk * dy;
+    // Fast: power * log2(e) as a polynomial in the lane's x, (q2 x + q1) x + q0.
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    let q2 = -0.5 * ca * LOG2E;
+    let q1 = (ca * cx + p1) * LOG2E;
+    let q0 = ((-0.5 * ca * cx - p1) * cx + p0) * LOG2E;
     let mut wl = [0.0f32; N];
     {
         let tr = &mut acc.t[r][B..B + N];
@@ -353,14 +391,20 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
         let tlr = &mut acc.tl[r][B..B + N];
         for j in 0..N {
             let x = (B + j) as f32;
-            let dx = x - cx;
-            let inside = if x >= xa && x < xb { lv[j] } else { 0.0 };
-            let power = (-0.5 * ca * dx * dx + p1 * dx + p0).min(0.0);
-            let g = exp_neg(power);
+            // Fast: no span mask; outside the ellipse alpha < 1/255 anyway, up to rounding.
+            let span = FAST || (x >= xa && x < xb);
+            let inside = if span { lv[j] } else { 0.0 };
+            let g = if FAST {
+                exp2_neg_fast((q2 * x + q1) * x + q0)
+            } else {
+                let dx = x - cx;
+                exp_neg((-0.5 * ca * dx * dx + p1 * dx + p0).min(0.0))
+            };
             let a = (o * g).min(ALPHA_MAX);
             let ok = if a >= ALPHA_MIN { inside } else { 0.0 };
             let test_t = tr[j] * (1.0 - a);
-            let term = if test_t < T_MIN { ok } else { 0.0 };
+            let t_min = if FAST { T_MIN_FAST } else { T_MIN };
+            let term = if test_t < t_min { ok } else { 0.0 };
             let add = ok - term;
             let wgt = add * a * tr[j];
             rr[j] += sr * wgt;
@@ -371,11 +415,7 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
             if LANG {
                 let al = (ol * g).min(ALPHA_MAX);
                 // Language stops where the colour stopped (live after this Gaussian's update).
-                let okl = if al >= ALPHA_MIN && x >= xa && x < xb {
-                    lv[j]
-                } else {
-                    0.0
-                };
+                let okl = if al >= ALPHA_MIN && span { lv[j] } else { 0.0 };
                 wl[j] = okl * al * tlr[j];
                 tlr[j] -= wl[j];
             }
@@ -399,7 +439,7 @@ fn row_span<const N: usize, const B: usize, const LANG: bool>(
 /// (tests/exact_compositing.rs checks the bits). An AVX-512 version was tried: 3 % faster in
 /// colour but 18 % slower with language (273k scene, one thread), so it is not built.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+sse4.1"))]
-fn composite<const LANG: bool>(
+fn composite<const LANG: bool, const FAST: bool>(
     splats: &[Splat2d],
     list: &[u32],
     x0: u32,
@@ -438,7 +478,7 @@ fn composite<const LANG: bool>(
             if acc.rows_live == 0 {
                 break;
             }
-            splat_on_tile::<LANG>(&mut acc, s, x0, y0, w, h, lang);
+            splat_on_tile::<LANG, FAST>(&mut acc, s, x0, y0, w, h, lang);
         }
     }
     let mut c = vec![0.0f32; TP * 3];

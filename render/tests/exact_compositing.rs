@@ -90,7 +90,7 @@ fn check(g: &dlgs::Gaussians, cam: &Camera, features: bool) {
                     .iter()
                     .copied()
                     .filter(|&k| {
-                        let t = splats[k as usize].tiles;
+                        let t = splats[k as usize].tiles();
                         (t[0] as u32..t[2] as u32).contains(&tx)
                             && (t[1] as u32..t[3] as u32).contains(&ty)
                     })
