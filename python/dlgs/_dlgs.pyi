@@ -62,10 +62,10 @@ class Reader:
         form (SH DC, log-scales, opacity logits)."""
     def render(self, t: float, camera: Camera, width: Optional[int] = None,
                height: Optional[int] = None, features: bool = False,
-               background: Tuple[float, float, float] = (1.0, 1.0, 1.0), cull: bool = True
-               ) -> Union[F32, Tuple[F32, F32]]:
+               background: Tuple[float, float, float] = (1.0, 1.0, 1.0), cull: bool = True,
+               fast: bool = False) -> Union[F32, Tuple[F32, F32]]:
         """HxWx3 linear colour (not clamped); with features=True also the HxWxL language
-        feature image."""
+        feature image; fast=True: the faster compositing of `dlgs render --fast-render`."""
     def query(self, text_embedding: Any, t: float, camera: Camera, width: Optional[int] = None,
               height: Optional[int] = None, negatives: Any = None,
               lang_decoder: Optional[PathLike] = None, threshold: float = 0.4,

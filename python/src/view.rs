@@ -4,7 +4,7 @@
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::Gaussians;
 use dlgs_query::{query_levels, Embeddings, ImageQuery, MaskParams, Precision, RelevanceField};
-use dlgs_render::{render, Camera, RenderOptions};
+use dlgs_render::{render, Accuracy, Camera, RenderOptions};
 
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
@@ -14,7 +14,7 @@ use crate::arrays::owned_array;
 use crate::errors::{other, request, Res};
 
 /// A rendered colour image (HxWx3, linear, not clamped) and, when asked, the language
-/// feature image (HxWxlang_width).
+/// feature image (HxWxlang_width). `fast`: the renderer's `Accuracy::Fast` (`--fast-render`).
 pub struct Rendered {
     pub width: usize,
     pub height: usize,
@@ -27,6 +27,7 @@ pub fn render_arrays(
     cam: &Camera,
     features: bool,
     background: [f32; 3],
+    fast: bool,
 ) -> Res<Rendered> {
     if features && !g.has_language() {
         return Err(request(
@@ -39,7 +40,11 @@ pub fn render_arrays(
         &RenderOptions {
             background,
             features,
-            ..Default::default()
+            accuracy: if fast {
+                Accuracy::Fast
+            } else {
+                Accuracy::Exact
+            },
         },
     )
     .map_err(other)?;
@@ -81,7 +86,7 @@ pub fn query_arrays(
     };
     let mut field = RelevanceField::new(dec, positives, negatives, precision).map_err(other)?;
     field.temperature = p.temperature;
-    let img = render_arrays(g, cam, true, [1.0, 1.0, 1.0])?;
+    let img = render_arrays(g, cam, true, [1.0, 1.0, 1.0], false)?;
     let (features, _) = img.features.expect("features were asked for");
     let (levels, dims) = shape;
     if let Some(l) = p.level {

@@ -43,6 +43,23 @@ def test_renders_equal_cli_render(dyn_hevc, work):
             assert rgb.std() > 0.01  # something was drawn
 
 
+def test_fast_render_equals_cli_fast_render_and_is_close_to_exact(dyn_hevc, work):
+    r = dlgs.open(dyn_hevc)
+    cams = work / "cams_fast.json"
+    run_cli("cameras", dyn_hevc, "--orbit", 2, "--width", 160, "--height", 120, "-o", cams)
+    cam = json.loads(cams.read_text())[1]
+    png = work / "render_fast.png"
+    run_cli("render", dyn_hevc, "--cameras", cams, "--view", 1, "--t", 0.4321, "--features",
+            "--fast-render", "-o", png)
+    rgb, feats = r.render(0.4321, cam, features=True, fast=True)
+    cli_feats = np.fromfile(png.with_suffix(".features.f32"), "<f4").reshape(120, 160, 9)
+    assert np.array_equal(feats.view(np.uint32), cli_feats.view(np.uint32))
+    assert np.array_equal(quantise(rgb), read_png_rgb8(png))
+    exact = r.render(0.4321, cam)
+    mse = float(np.mean((rgb.astype(np.float64) - exact) ** 2))
+    assert mse == 0 or 10 * np.log10(1.0 / mse) >= 60.0, mse
+
+
 def test_iteration_and_camera_forms(dyn_exact):
     r = dlgs.open(dyn_exact)
     frames = list(r)
