@@ -16,6 +16,7 @@
 //!   way in to the lossless grid codecs and the layout helpers; everything else is internal).
 
 mod adaptive_coder;
+mod bit_coder;
 mod cells;
 mod channels;
 mod colour_lattice;

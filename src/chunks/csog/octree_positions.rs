@@ -15,7 +15,7 @@ use crate::container::ChunkType;
 use crate::Error;
 use constriction::stream::queue::DefaultRangeEncoder;
 
-use super::adaptive_coder::{open_stream, Adaptive, BitCoder, Decoder, Encoder};
+use super::bit_coder::{open_stream, Adaptive, BitCoder, Decoder, Encoder};
 use crate::bytes::{ByteReader, PutLe};
 use crate::error::Result;
 

@@ -14,7 +14,8 @@
 //!   it up; the mixer's output gives the coder's 16-bit probability and the 12-bit one in one
 //!   load ([`SQUASH_AND_P16`]); the weights live on the stack.
 
-use super::adaptive_coder::{top_bits, Adaptive, Mode, Previous, NEIGHBOUR_CONTEXTS, ONE, P_MIN};
+use super::adaptive_coder::{top_bits, Mode, Previous, NEIGHBOUR_CONTEXTS};
+use super::bit_coder::{Adaptive, ONE, P_MIN};
 use crate::entropy::binary_range_decoder::BinaryRangeDecoder;
 use crate::entropy::bit_mixer::{BIAS, LEARNING_SHIFT, SQUASH_AND_P16, STRETCH_X8, WEIGHT_LIMIT};
 
@@ -24,7 +25,7 @@ const NODES: usize = 1 << 10;
 /// Weight vectors: one per tree level, at most 10.
 const LEVELS: usize = 16;
 
-/// An adaptive binary model as `adaptive_coder::Adaptive` (the same probability after every
+/// An adaptive binary model as `bit_coder::Adaptive` (the same probability after every
 /// bit), with its log-odds kept: `aux` is `stretch(p >> 4) << 3` plus, in the low 3 bits, how
 /// many bits it has seen, up to 5 (from then on its adaptation rate stays `1/2^MAX_SHIFT`).
 #[derive(Clone, Copy)]
