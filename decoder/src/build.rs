@@ -19,24 +19,25 @@ fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
 }
 
 /// Decode key pictures with `hevc`, or fail with `NoHevcDecoder` when there is none. A
-/// decoder's failure is a fault of the `TFEA` payload at `at`.
+/// decoder's failure is a fault of the `TFEA` payload at `at`. `beside`: the decode runs beside
+/// other work (see [`crate::hevc::KeyPictureDecoder::decode_beside`]).
 pub(crate) fn key_pictures(
     hevc: Option<&SharedKeyPictureDecoder>,
     packets: &[&[u8]],
     tiling: &Tiling,
     expect: usize,
     at: u64,
+    beside: bool,
 ) -> Result<Vec<Vec<u16>>> {
     let hevc = hevc.ok_or(Error::NoHevcDecoder)?;
     let bad = |reason: String| Error::payload(ChunkType::TFEA, reason, at);
-    let pictures = hevc
-        .decode(
-            packets,
-            tiling.width() as u32,
-            tiling.height() as u32,
-            expect,
-        )
-        .map_err(bad)?;
+    let (w, h) = (tiling.width() as u32, tiling.height() as u32);
+    let pictures = if beside {
+        hevc.decode_beside(packets, w, h, expect)
+    } else {
+        hevc.decode(packets, w, h, expect)
+    }
+    .map_err(bad)?;
     if pictures.len() != expect {
         return Err(bad(format!(
             "the HEVC decoder gave {} pictures, {expect} expected",
@@ -209,7 +210,7 @@ pub(crate) fn decode_time_features(
                 Err(packets) => packets,
             };
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
-            let frames = key_pictures(hevc, &refs, &tiling, tiling.keys, at)?;
+            let frames = key_pictures(hevc, &refs, &tiling, tiling.keys, at, false)?;
             let data = match reference {
                 Some(range) => {
                     tfea::untile_columns(&frames, &tiling, tfea::reference_sample_value(range))
@@ -234,12 +235,14 @@ struct IntraKeys {
 impl KeySource for IntraKeys {
     fn key(&self, k: usize) -> Result<Vec<f32>> {
         let t = &self.tiling;
+        // Keys decode two at a time (a frame's pair), each on one thread.
         let frames = key_pictures(
             self.hevc.as_ref(),
             &[self.packets[k].as_slice()],
             t,
             1,
             self.at,
+            true,
         )?;
         let one = Tiling { keys: 1, ..*t };
         Ok(tfea::untile_columns(

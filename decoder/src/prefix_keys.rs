@@ -112,10 +112,12 @@ impl PrefixKeys {
     }
 
     /// Decode the first `m` packets on their own (any decoder): the pictures they hold, in
-    /// output order, fill their keys' slots.
+    /// output order, fill their keys' slots. A prefix short of the whole stream is decoded on
+    /// one thread: it is the first request, which runs beside the GOP's state decode.
     fn fill_from_prefix(&self, m: usize, slots: &[OnceLock<Vec<f32>>]) -> Result<()> {
         let refs: Vec<&[u8]> = self.packets[..m].iter().map(|v| v.as_slice()).collect();
-        let pictures = key_pictures(self.hevc.as_ref(), &refs, &self.tiling, m, self.at)?;
+        let beside = m < self.packets.len();
+        let pictures = key_pictures(self.hevc.as_ref(), &refs, &self.tiling, m, self.at, beside)?;
         let mut keys: Vec<usize> = (0..self.tiling.keys)
             .filter(|&k| self.position[k] < m)
             .collect();
@@ -187,11 +189,11 @@ impl PrefixKeys {
     ) -> Result<()> {
         let t = &self.tiling;
         let m = 1 + needed.iter().map(|&k| self.position[k]).max().unwrap_or(0);
-        let in_order = self.position.iter().enumerate().all(|(k, &i)| k == i);
         if !p.streaming {
-            // The first request, when it needs fewer than all packets: that prefix alone (a
-            // stream in output order gives the same from the packet-at-a-time decoder).
-            if !p.prefix_done && !in_order && m < self.packets.len() {
+            // The first request, when it needs fewer than all packets: that prefix alone, on
+            // one thread (even a stream in output order: the packet-at-a-time decoder's frame
+            // threads hold pictures back until later packets arrive).
+            if !p.prefix_done && m < self.packets.len() {
                 p.prefix_done = true;
                 return self.fill_from_prefix(m, slots);
             }
@@ -214,7 +216,7 @@ impl KeySource for PrefixKeys {
     fn key(&self, k: usize) -> Result<Vec<f32>> {
         let m = self.position[k] + 1;
         let refs: Vec<&[u8]> = self.packets[..m].iter().map(|v| v.as_slice()).collect();
-        let pictures = key_pictures(self.hevc.as_ref(), &refs, &self.tiling, m, self.at)?;
+        let pictures = key_pictures(self.hevc.as_ref(), &refs, &self.tiling, m, self.at, true)?;
         let rank = (0..self.tiling.keys)
             .filter(|&j| j < k && self.position[j] < m)
             .count();

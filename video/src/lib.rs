@@ -234,7 +234,19 @@ pub fn decode_gray12(
     height: u32,
     expect_frames: usize,
 ) -> Result<Gray12, VideoError> {
-    let mut dec = Gray12Decoder::new(width, height, expect_frames)?;
+    decode_gray12_on(packets, width, height, expect_frames, 0)
+}
+
+/// [`decode_gray12`] with FFmpeg's thread count: 0 = automatic (frame and wavefront threads),
+/// 1 = the calling thread only (for a decode that runs beside other work on the other cores).
+pub fn decode_gray12_on(
+    packets: &[&[u8]],
+    width: u32,
+    height: u32,
+    expect_frames: usize,
+    threads: usize,
+) -> Result<Gray12, VideoError> {
+    let mut dec = Gray12Decoder::with_threads(width, height, expect_frames, threads)?;
     let mut frames = Vec::with_capacity(expect_frames.min(4096));
     for p in packets {
         frames.extend(dec.push(p)?);
@@ -268,6 +280,16 @@ pub struct Gray12Decoder {
 impl Gray12Decoder {
     /// A decoder of pictures of `width` x `height`; more than `max_frames` pictures is an error.
     pub fn new(width: u32, height: u32, max_frames: usize) -> Result<Self, VideoError> {
+        Self::with_threads(width, height, max_frames, 0)
+    }
+
+    /// [`Self::new`] with FFmpeg's thread count (0 = automatic).
+    pub fn with_threads(
+        width: u32,
+        height: u32,
+        max_frames: usize,
+        threads: usize,
+    ) -> Result<Self, VideoError> {
         init();
         let codec =
             ff::decoder::find(ff::codec::Id::HEVC).ok_or(VideoError::MissingCodec("HEVC"))?;
@@ -278,9 +300,14 @@ impl Gray12Decoder {
         let mut opts = ff::Dictionary::new();
         let max_pixels = (width as u64 + 128) * (height as u64 + 128);
         opts.set("max_pixels", &max_pixels.to_string());
-        // Frame and wavefront threads (x265 writes WPP streams); HEVC decoding is bit-exact,
-        // so the thread count cannot change the features.
-        opts.set("threads", "auto");
+        // Frame and wavefront threads (x265 writes WPP streams) unless asked otherwise; HEVC
+        // decoding is bit-exact, so the thread count cannot change the features.
+        let threads = if threads == 0 {
+            "auto".to_string()
+        } else {
+            threads.to_string()
+        };
+        opts.set("threads", &threads);
         let dec = ctx
             .decoder()
             .open_as_with(codec, opts)
