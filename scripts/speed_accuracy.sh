@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # What accuracy costs in decode time, one table per decode stage (issue 55), on a real scene
 # made dynamic with SYNTHETIC motion and language (no trained DLGStream model exists here):
-#   1. time features (TFEA): exact / HEVC lossless / crf 6 (default) / 12 / 20 / intra-only
+#   1. time features (TFEA): exact / HEVC lossless / crf 6 (default; and without fast start) /
+#      12 / 20 / intra-only
 #      crf 6: bytes per frame, the features' share of a GOP decode (median over GOPs, from
 #      `dlgs play --max-speed --json`), and PSNR against the exact-feature model;
 #   2. canonical state: lossless / near-lossless / high / medium, and high with --fast-decode:
@@ -37,7 +38,7 @@ echo
 echo "## Time features (3 GOPs of 60 frames)"
 echo "| setting | TFEA bytes/frame | time features per GOP (median) | key preparation per GOP (median; intra-only pictures decode here) | PSNR t = 0.5 / 1.2345 s vs exact |"
 echo "|---|---|---|---|---|"
-for setting in "--exact-features" "--lossless-features" "--crf 6" "--crf 12" "--crf 20" "--intra-features --crf 6"; do
+for setting in "--exact-features" "--lossless-features" "--crf 6" "--crf 6 --fast-start off" "--crf 12" "--crf 20" "--intra-features --crf 6"; do
   # shellcheck disable=SC2086
   $dlgs encode "$work/exact.dlgs" -o "$work/f.dlgs" $setting >/dev/null
   bytes=$($dlgs info --json "$work/f.dlgs" | json 'd["chunk_bytes_by_type"]["TFEA"]')
