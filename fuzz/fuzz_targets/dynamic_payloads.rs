@@ -1,4 +1,5 @@
-//! The TFEA, MLPW and LAED payload parsers directly, against a fixed dynamic scene header.
+//! The TFEA, MLPW and LAED payload parsers directly, against a fixed dynamic scene header
+//! (and the HEVC slice-header reader of `TFEA` streams, `dlgs_decoder::hevc::display_order`).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
@@ -26,6 +27,14 @@ fuzz_target!(|data: &[u8]| {
                 // Codec 3: every packet decodes alone, as a seek does it.
                 for p in &packets {
                     let _ = dlgs_video::decode_gray12(&[p.as_slice()], tiling.width() as u32, tiling.height() as u32, 1);
+                }
+            }
+            // The output order read from the slice headers (what a prefix decode relies on):
+            // `None` or a permutation of the packets, never a panic.
+            if let Some(order) = dlgs_decoder::hevc::display_order(&packets) {
+                let mut seen = vec![false; packets.len()];
+                for &d in &order {
+                    assert!(!std::mem::replace(&mut seen[d], true), "a permutation");
                 }
             }
             let refs: Vec<&[u8]> = packets.iter().map(|p| p.as_slice()).collect();
