@@ -36,7 +36,7 @@ frames=$($dlgs info --json "$work/exact.dlgs" | json 'd["header"]["frame_count"]
 
 echo
 echo "## Time features (3 GOPs of 60 frames)"
-echo "| setting | TFEA bytes/frame | time features per GOP (median) | key preparation per GOP (median; intra-only pictures decode here) | PSNR t = 0.5 / 1.2345 s vs exact |"
+echo "| setting | TFEA bytes/frame | time features per GOP (median) | key preparation per GOP (median; the keys' geometry) | PSNR t = 0.5 / 1.2345 s vs exact |"
 echo "|---|---|---|---|---|"
 for setting in "--exact-features" "--lossless-features" "--crf 6" "--crf 6 --fast-start off" "--crf 12" "--crf 20" "--intra-features --crf 6"; do
   # shellcheck disable=SC2086
