@@ -173,7 +173,7 @@ fn parse_sps(rbsp: &[u8]) -> Option<Sps> {
     }
     b.ue()?; // bit_depth_luma_minus8
     b.ue()?; // bit_depth_chroma_minus8
-    let log2_max_poc_lsb = b.ue()? + 4;
+    let log2_max_poc_lsb = b.ue()?.checked_add(4)?; // log2_max_pic_order_cnt_lsb_minus4
     if log2_max_poc_lsb > 16 {
         return None;
     }
@@ -258,6 +258,38 @@ mod tests {
         for g in garbage {
             assert!(display_order(&[g]).is_none());
         }
+    }
+
+    /// An SPS whose `log2_max_pic_order_cnt_lsb_minus4` is the largest `ue(v)` (found by the
+    /// `dynamic_payloads` fuzz target: `+ 4` overflowed) is unreadable, not a panic.
+    #[test]
+    fn the_largest_poc_lsb_field_is_unreadable() {
+        let mut bits = String::new();
+        bits += "0000" /* vps id */;
+        bits += "000" /* sub-layers - 1 */;
+        bits += "1" /* nesting */;
+        bits += &"0".repeat(96) /* profile_tier_level */;
+        bits += "1111" /* sps id, chroma 0, width 0, height 0 */;
+        bits += "0" /* no conformance window */;
+        bits += "11" /* bit depths */;
+        bits += &("0".repeat(31) + &"1".repeat(32)) /* ue = 2^32 - 2 */;
+        bits += &"1".repeat(8);
+        let pack = |bits: &str| -> Vec<u8> {
+            let bits = bits.as_bytes();
+            bits.chunks(8)
+                .map(|c| {
+                    c.iter()
+                        .enumerate()
+                        .fold(0u8, |b, (i, &bit)| b | (u8::from(bit == b'1') << (7 - i)))
+                })
+                .collect()
+        };
+        assert!(parse_sps(&pack(&bits)).is_none());
+        let mut ok = bits[..111].to_string();
+        ok += "00100" /* ue = 3: 7 bits of LSBs */;
+        ok += &"1".repeat(8);
+        let bytes = pack(&ok);
+        assert_eq!(parse_sps(&bytes).map(|s| s.log2_max_poc_lsb), Some(7));
     }
 
     /// x265's own streams: the output order read from the slice headers is the order FFmpeg
