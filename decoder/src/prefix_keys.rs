@@ -192,9 +192,9 @@ impl PrefixKeys {
         let t = &self.tiling;
         let m = 1 + needed.iter().map(|&k| self.position[k]).max().unwrap_or(0);
         if !p.streaming {
-            // The first request, when it needs fewer than all packets: that prefix alone, on
-            // one thread (even a stream in output order: the packet-at-a-time decoder's frame
-            // threads hold pictures back until later packets arrive).
+            // The first request, when it needs fewer than all packets: that prefix alone (even
+            // for a stream in output order: a prefix decoded on its own leaves the cores to the
+            // state decode beside it).
             if !p.prefix_done && m < self.packets.len() {
                 p.prefix_done = true;
                 return self.fill_from_prefix(m, slots);

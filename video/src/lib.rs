@@ -266,8 +266,8 @@ pub fn decode_gray12_on(
 }
 
 /// An HEVC Main 12 4:0:0 decoder fed one packet at a time: each call returns the pictures it
-/// released (in output order; FFmpeg's frame threads hold a picture back for a packet or
-/// two). Low-delay streams thus give their first pictures without the rest of the stream.
+/// released, in output order (a stream with B-frames holds pictures back until the reordering
+/// allows them out).
 pub struct Gray12Decoder {
     dec: ff::decoder::Video,
     width: u32,
@@ -300,14 +300,19 @@ impl Gray12Decoder {
         let mut opts = ff::Dictionary::new();
         let max_pixels = (width as u64 + 128) * (height as u64 + 128);
         opts.set("max_pixels", &max_pixels.to_string());
-        // Frame and wavefront threads (x265 writes WPP streams) unless asked otherwise; HEVC
-        // decoding is bit-exact, so the thread count cannot change the features.
+        // Wavefront threads (x265 writes WPP streams) unless asked otherwise; HEVC decoding is
+        // bit-exact, so the thread count cannot change the features.
         let threads = if threads == 0 {
             "auto".to_string()
         } else {
             threads.to_string()
         };
         opts.set("threads", &threads);
+        // Slice (wavefront) threads only: FFmpeg 5.1's HEVC frame threads crashed (SIGSEGV in
+        // `avcodec_send_packet`, a race) on damaged streams within a minute of the
+        // `dynamic_payloads` fuzz target; with slice threads 2.7 M runs found nothing. x265's
+        // streams use wavefront rows, so the decode stays parallel (docs/benchmarks/fuzz.md).
+        opts.set("thread_type", "slice");
         let dec = ctx
             .decoder()
             .open_as_with(codec, opts)
