@@ -179,7 +179,7 @@ pub(crate) fn decode_time_features(
             tiling.channels,
             Arc::new(IntraKeys {
                 tiling,
-                ranges,
+                dequantise: Dequantise::Ranges(ranges),
                 packets,
                 at,
                 hevc: hevc.cloned(),
@@ -225,7 +225,7 @@ pub(crate) fn decode_time_features(
 /// Intra-only HEVC time features (`TFEA` codec 3): packet `k` is key `k`'s picture alone.
 struct IntraKeys {
     tiling: Tiling,
-    ranges: Vec<(f32, f32)>,
+    dequantise: Dequantise,
     packets: Vec<Vec<u8>>,
     /// Offset of the `TFEA` payload, for errors.
     at: u64,
@@ -234,22 +234,16 @@ struct IntraKeys {
 
 impl KeySource for IntraKeys {
     fn key(&self, k: usize) -> Result<Vec<f32>> {
-        let t = &self.tiling;
         // Keys decode two at a time (a frame's pair), each on one thread.
         let frames = key_pictures(
             self.hevc.as_ref(),
             &[self.packets[k].as_slice()],
-            t,
+            &self.tiling,
             1,
             self.at,
             true,
         )?;
-        let one = Tiling { keys: 1, ..*t };
-        Ok(tfea::untile_columns(
-            &frames,
-            &one,
-            tfea::sample_value(&self.ranges),
-        ))
+        Ok(self.dequantise.untile_key(&frames[0], &self.tiling))
     }
 }
 

@@ -42,7 +42,7 @@ pub trait KeyPictureDecoder: Send + Sync {
     }
 
     /// A decoder that takes one stream's packets one at a time ([`KeyPictureStream`]), when
-    /// this implementation has one: low-delay streams then decode key by key, each picture
+    /// this implementation has one: one-stream features then decode key by key, each picture
     /// once. Default: none (such streams decode from prefixes with [`Self::decode`]).
     fn stream(
         &self,

@@ -138,7 +138,6 @@ struct Sps {
 struct Pps {
     id: u32,
     sps_id: u32,
-    dependent_slice_segments: bool,
     output_flag_present: bool,
     extra_slice_header_bits: u32,
 }
@@ -186,10 +185,14 @@ fn parse_sps(rbsp: &[u8]) -> Option<Sps> {
 
 fn parse_pps(rbsp: &[u8]) -> Option<Pps> {
     let mut b = Bits::new(rbsp);
+    let id = b.ue()?;
+    let sps_id = b.ue()?;
+    // dependent_slice_segments_enabled_flag: a picture's first slice segment carries no
+    // dependent_slice_segment_flag (nor a slice_segment_address), so it does not matter here.
+    b.skip(1)?;
     Some(Pps {
-        id: b.ue()?,
-        sps_id: b.ue()?,
-        dependent_slice_segments: b.u(1)? == 1,
+        id,
+        sps_id,
         output_flag_present: b.u(1)? == 1,
         extra_slice_header_bits: b.u(3)?,
     })
@@ -207,9 +210,6 @@ fn slice_poc(ty: u8, rbsp: &[u8], sps: &HashMap<u32, Sps>, pps: &HashMap<u32, Pp
     }
     let q = pps.get(&b.ue()?)?; // slice_pic_parameter_set_id
     let s = sps.get(&q.sps_id)?;
-    // A first slice has no dependent_slice_segment_flag (even when `q` allows dependent
-    // segments) and no slice_segment_address.
-    let _ = q.dependent_slice_segments;
     b.skip(q.extra_slice_header_bits as usize)?; // slice_reserved_flag[i]
     b.ue()?; // slice_type
     if q.output_flag_present {

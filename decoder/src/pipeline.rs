@@ -58,7 +58,7 @@ impl<R: Read + Send + 'static> GopSource for StreamDecoder<R> {
     }
     fn finish_gop(gop: &DecodedGop) {
         // Interval by interval, so that a frame waiting for a key gets it as soon as it is
-        // decoded (low-delay streams decode key by key). A key that fails here fails again,
+        // decoded (one-stream features decode picture by picture, `prefix_keys.rs`). A key that fails here fails again,
         // with its error, in the frame that needs it.
         let keys = gop.deformer.as_ref().map_or(0, |d| d.key_count());
         for k in 0..keys.saturating_sub(1) {

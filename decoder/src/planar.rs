@@ -14,7 +14,7 @@ use crate::interp::lerp;
 use crate::panel::{Lane, PANEL};
 
 /// Decodes one key's features, `(C, N)` column-major, on demand (intra-only HEVC time
-/// features: each key is its own picture; low-delay streams: a prefix of the stream).
+/// features: each key is its own picture; one-stream features: a prefix of the stream).
 pub trait KeySource: Send + Sync {
     fn key(&self, k: usize) -> Result<Vec<f32>>;
 
@@ -77,7 +77,7 @@ impl PlanarFeatures {
     }
 
     /// Features whose keys are decoded by `source` when first needed ([`Self::ensure_keys`]):
-    /// intra-only and low-delay HEVC streams.
+    /// intra-only and one-stream HEVC features (`prefix_keys.rs`).
     pub fn per_key(n: usize, keys: usize, channels: usize, source: Arc<dyn KeySource>) -> Self {
         PlanarFeatures {
             n,

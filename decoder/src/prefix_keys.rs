@@ -30,6 +30,19 @@ pub(crate) enum Dequantise {
     Reference((f64, f64)),
 }
 
+impl Dequantise {
+    /// One key's `(C, N)` block from its picture, on the calling thread.
+    pub fn untile_key(&self, picture: &[u16], tiling: &Tiling) -> Vec<f32> {
+        let one = Tiling { keys: 1, ..*tiling };
+        match self {
+            Dequantise::Ranges(r) => tfea::untile_key(picture, &one, tfea::sample_value(r)),
+            Dequantise::Reference(r) => {
+                tfea::untile_key(picture, &one, tfea::reference_sample_value(*r))
+            }
+        }
+    }
+}
+
 /// The keys of a one-stream `TFEA` whose output order is known.
 pub(crate) struct PrefixKeys {
     tiling: Tiling,
@@ -93,18 +106,8 @@ impl PrefixKeys {
         })
     }
 
-    /// One key's `(C, N)` block from its picture, on this thread.
     fn untile(&self, picture: &[u16]) -> Vec<f32> {
-        let one = Tiling {
-            keys: 1,
-            ..self.tiling
-        };
-        match &self.dequantise {
-            Dequantise::Ranges(r) => tfea::untile_key(picture, &one, tfea::sample_value(r)),
-            Dequantise::Reference(r) => {
-                tfea::untile_key(picture, &one, tfea::reference_sample_value(*r))
-            }
-        }
+        self.dequantise.untile_key(picture, &self.tiling)
     }
 
     fn payload_error(&self, reason: String) -> Error {

@@ -219,8 +219,8 @@ impl<R: Read> StreamDecoder<R> {
             KeyPreparation::All => 0..usize::MAX,
             KeyPreparation::FirstInterval => 0..2,
         };
-        // The keys to prepare are decoded here, beside the state (low-delay and intra-only
-        // streams decode only those; other streams decode whole anyway).
+        // The keys to prepare are decoded here, beside the state (intra-only features, and
+        // one-stream features whose headers can be read, decode only those; others whole).
         let decode_dynamic = || {
             let t0 = Instant::now();
             let d = dynamic_payloads

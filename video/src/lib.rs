@@ -284,7 +284,7 @@ impl Gray12Decoder {
     }
 
     /// [`Self::new`] with FFmpeg's thread count (0 = automatic).
-    pub fn with_threads(
+    fn with_threads(
         width: u32,
         height: u32,
         max_frames: usize,
