@@ -12,6 +12,8 @@
 //! checkable (every opacity level of every bit width: the test in `chunks/csog/quantiser.rs`). `sin` and `acos` are
 //! within a few binary64 ulps on the ranges the deformation uses.
 
+use multiversion::multiversion;
+
 /// `ln 2` split so that `k * LN2_HI` is exact for `|k| < 2^20` (32 significant bits).
 const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
 const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
@@ -163,25 +165,57 @@ pub fn exp(x: f64) -> f64 {
 
 /// `sin x`, binary64, for finite `x` (accurate for `|x| < 2^20 π/2`); non-finite: NaN.
 pub fn sin(x: f64) -> f64 {
-    if !x.is_finite() {
-        return f64::NAN;
+    sin_core(x)
+}
+
+/// [`sin`] of every value in place: the same bits, in SIMD lanes where the CPU has them (the
+/// steps are [`sin`]'s, without a branch or a conversion to an integer).
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+pub fn sin_lanes(values: &mut [f64]) {
+    for x in values.iter_mut() {
+        *x = sin_core(*x);
     }
-    let k = (x * std::f64::consts::FRAC_2_PI).round();
+}
+
+/// `round(t)`, halves away from zero, from `trunc` (exact) and the exact fraction `t - trunc t`:
+/// the same value as `f64::round` (up to the sign of a zero), vectorisable.
+#[inline(always)]
+fn round_half_away(t: f64) -> f64 {
+    let whole = t.trunc();
+    let step: f64 = if (t - whole).abs() >= 0.5 { 1.0 } else { 0.0 };
+    whole + step.copysign(t)
+}
+
+/// `k mod 4` of an integer-valued `k` as an integer, non-negative, exactly: `k/4` and its
+/// floor are exact, and so is `k - 4 floor(k/4)`, in `0..=3`, also for `k` beyond `2^63`.
+#[inline(always)]
+fn quadrant(k: f64) -> f64 {
+    k - 4.0 * (k * 0.25).floor()
+}
+
+/// Appendix B's `sin`, branch-free so that it vectorises.
+#[inline(always)]
+fn sin_core(x: f64) -> f64 {
+    let k = round_half_away(x * std::f64::consts::FRAC_2_PI);
     let r = (x - k * PIO2_HI) - k * PIO2_LO;
     let z = r * r;
     // sin r = r (1 - z/3! + z^2/5! - ...), cos r = 1 - z/2! + z^2/4! - ...; |r| <= π/4.
     let mut ps = 0.0;
     let mut pc = 0.0;
-    for j in (1..=8).rev() {
+    for j in (1..9).rev() {
         ps = (ps + SIN_C[j]) * z;
         pc = (pc + COS_C[j]) * z;
     }
     let (s, c) = (r + r * ps, 1.0 + pc);
-    match (k as i64).rem_euclid(4) {
-        0 => s,
-        1 => c,
-        2 => -s,
-        _ => -c,
+    // By k mod 4: s, c, -s, -c (selects, so that the loop vectorises).
+    let quadrant = quadrant(k);
+    let odd = (quadrant == 1.0) | (quadrant == 3.0);
+    let v = if odd { c } else { s };
+    let v = if quadrant >= 2.0 { -v } else { v };
+    if x.is_finite() {
+        v
+    } else {
+        f64::NAN
     }
 }
 
@@ -283,6 +317,67 @@ mod tests {
         assert_eq!(acos(-1.0), std::f64::consts::PI);
         assert!(acos(1.5).is_nan() && sin(f64::INFINITY).is_nan());
         assert_eq!(sin(0.0), 0.0);
+    }
+
+    /// The lanes give [`sin`]'s bits; both take `k mod 4` of `k` as an integer (Appendix B),
+    /// also where `k` is beyond every machine integer.
+    #[test]
+    fn sin_lanes_give_the_same_bits_as_sin() {
+        let mut rng = fastrand::Rng::with_seed(9);
+        let mut xs: Vec<f64> = (0..100_000)
+            .map(|i| match i % 4 {
+                0 => rng.f64() * 8.0 - 4.0,
+                1 => rng.f64() * std::f64::consts::PI,
+                2 => (rng.f64() - 0.5) * 1e7,
+                _ => f64::from_bits(rng.u64(..)),
+            })
+            .collect();
+        // Halves of the quadrant: `x · 2/π` within an ulp of `n + 1/2`.
+        for n in -50..50 {
+            let t = n as f64 + 0.5;
+            let x = t / std::f64::consts::FRAC_2_PI;
+            xs.extend([
+                x,
+                f64::from_bits(x.to_bits() + 1),
+                f64::from_bits(x.to_bits() - 1),
+            ]);
+        }
+        xs.extend([
+            0.0,
+            -0.0,
+            1e-300,
+            f64::MIN_POSITIVE,
+            1e19,
+            -1e19,
+            4e19,
+            1e300,
+            f64::MAX,
+            -f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ]);
+        let mut lanes = xs.clone();
+        sin_lanes(&mut lanes);
+        for (x, got) in xs.iter().zip(&lanes) {
+            let want = sin(*x);
+            assert!(
+                got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                "sin({x:e}): lanes {got:e}, scalar {want:e}"
+            );
+        }
+        let two = 2f64;
+        for (k, q) in [
+            (0.0, 0.0),
+            (5.0, 1.0),
+            (-1.0, 3.0),
+            (-6.0, 2.0),
+            (two.powi(53) + 2.0, 2.0),
+            (two.powi(64), 0.0),
+            (-two.powi(70), 0.0),
+        ] {
+            assert_eq!(quadrant(k), q, "{k:e} mod 4");
+        }
     }
 
     #[test]

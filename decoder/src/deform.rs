@@ -9,11 +9,12 @@ use std::ops::Range;
 use std::sync::OnceLock;
 
 use dlgs::container::header::DeformModel;
+use dlgs::elementary::sin_lanes;
 use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
 use dlgs::{Error, Result};
 use rayon::prelude::*;
 
-use crate::interp::{hermite, normalize4, slerp_angle, slerp_blend};
+use crate::interp::{hermite, normalize4, slerp_angle, slerp_arguments, slerp_from_sines};
 use crate::panel::{PanelMlp, Scratch, PANEL};
 use crate::planar::PlanarFeatures;
 
@@ -440,9 +441,25 @@ impl Deformer {
         // Geometry.
         match geo {
             Some((ga, gb, angles)) => {
+                // The slerp's sines a panel at a time, in SIMD lanes (the same bits as one by
+                // one): `sin((1 - d) ω)` of the panel's rows, then `sin(d ω)`.
+                let mut sines = [0f64; 2 * PANEL];
+                for p in panels(rows.clone()) {
+                    let m = p.len();
+                    for (l, i) in p.clone().enumerate() {
+                        let (a0, a1) = slerp_arguments(angles[i][0], d);
+                        sines[l] = a0 as f64;
+                        sines[m + l] = a1 as f64;
+                    }
+                    sin_lanes(&mut sines[..2 * m]);
+                    for (l, i) in p.enumerate() {
+                        let r = i - rows.start;
+                        let (s0, s1) = (sines[l] as f32, sines[m + l] as f32);
+                        out.rot[r] = slerp_from_sines(ga.quat[i], gb.quat[i], angles[i][1], s0, s1);
+                    }
+                }
                 for (r, i) in rows.clone().enumerate() {
                     out.pos[r] = hermite(ga.pos[i], ga.tangent[i], gb.pos[i], gb.tangent[i], d);
-                    out.rot[r] = slerp_blend(ga.quat[i], gb.quat[i], angles[i], d);
                     if let Some(ds) = &ga.dscale {
                         // Key `k` only, no interpolation (the reference's eval path).
                         for c in 0..3 {

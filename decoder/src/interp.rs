@@ -39,8 +39,22 @@ pub fn slerp_angle(q0: [f32; 4], q1: [f32; 4]) -> [f32; 2] {
 /// to sum 1, no shortest-arc flip, then normalised.
 #[inline]
 pub fn slerp_blend(q0: [f32; 4], q1: [f32; 4], [omega, s]: [f32; 2], d: f32) -> [f32; 4] {
-    let mut p0 = sin_f32((1.0 - d) * omega) / s;
-    let mut p1 = sin_f32(d * omega) / s;
+    let (a0, a1) = slerp_arguments(omega, d);
+    slerp_from_sines(q0, q1, s, sin_f32(a0), sin_f32(a1))
+}
+
+/// The two angles whose sines [`slerp_blend`] takes: `(1 - d) ω` and `d ω`.
+#[inline]
+pub fn slerp_arguments(omega: f32, d: f32) -> (f32, f32) {
+    ((1.0 - d) * omega, d * omega)
+}
+
+/// [`slerp_blend`] given `sin32` of [`slerp_arguments`] (e.g. from
+/// `dlgs::elementary::sin_lanes`, the same bits) and `s = sin ω`.
+#[inline]
+pub fn slerp_from_sines(q0: [f32; 4], q1: [f32; 4], s: f32, sin0: f32, sin1: f32) -> [f32; 4] {
+    let mut p0 = sin0 / s;
+    let mut p1 = sin1 / s;
     let sum = (p0 + p1).max(1e-4);
     p0 /= sum;
     p1 /= sum;
