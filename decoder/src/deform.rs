@@ -14,7 +14,7 @@ use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
 use dlgs::{Error, Result};
 use rayon::prelude::*;
 
-use crate::interp::{hermite, normalize4, slerp_angle, slerp_arguments, slerp_from_sines};
+use crate::interp::{hermite, normalize4, slerp_angle, slerp_arguments, slerp_panel};
 use crate::panel::{PanelMlp, Scratch, PANEL};
 use crate::planar::PlanarFeatures;
 
@@ -443,7 +443,11 @@ impl Deformer {
             Some((ga, gb, angles)) => {
                 // The slerp's sines a panel at a time, in SIMD lanes (the same bits as one by
                 // one): `sin((1 - d) ω)` of the panel's rows, then `sin(d ω)`.
+                // Then the blend a panel at a time, also in lanes.
                 let mut sines = [0f64; 2 * PANEL];
+                let (mut q0, mut q1, mut q) =
+                    ([[0f32; PANEL]; 4], [[0f32; PANEL]; 4], [[0f32; PANEL]; 4]);
+                let (mut s, mut s0, mut s1) = ([1f32; PANEL], [0f32; PANEL], [0f32; PANEL]);
                 for p in panels(rows.clone()) {
                     let m = p.len();
                     for (l, i) in p.clone().enumerate() {
@@ -452,10 +456,18 @@ impl Deformer {
                         sines[m + l] = a1 as f64;
                     }
                     sin_lanes(&mut sines[..2 * m]);
+                    for (l, i) in p.clone().enumerate() {
+                        for c in 0..4 {
+                            q0[c][l] = ga.quat[i][c];
+                            q1[c][l] = gb.quat[i][c];
+                        }
+                        s[l] = angles[i][1];
+                        s0[l] = sines[l] as f32;
+                        s1[l] = sines[m + l] as f32;
+                    }
+                    slerp_panel(&q0, &q1, [&s, &s0, &s1], &mut q);
                     for (l, i) in p.enumerate() {
-                        let r = i - rows.start;
-                        let (s0, s1) = (sines[l] as f32, sines[m + l] as f32);
-                        out.rot[r] = slerp_from_sines(ga.quat[i], gb.quat[i], angles[i][1], s0, s1);
+                        out.rot[i - rows.start] = [q[0][l], q[1][l], q[2][l], q[3][l]];
                     }
                 }
                 for (r, i) in rows.clone().enumerate() {

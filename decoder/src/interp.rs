@@ -3,6 +3,9 @@
 //! has the same bits on every platform.
 
 use dlgs::elementary::{acos_f32, sin_f32};
+use multiversion::multiversion;
+
+use crate::panel::PANEL;
 
 /// `F.normalize(q, eps=1e-12)`: a zero quaternion stays zero.
 #[inline]
@@ -59,10 +62,32 @@ pub fn slerp_from_sines(q0: [f32; 4], q1: [f32; 4], s: f32, sin0: f32, sin1: f32
     p0 /= sum;
     p1 /= sum;
     let r: [f32; 4] = std::array::from_fn(|a| p0 * q0[a] + p1 * q1[a]);
-    if r.iter().map(|v| v.abs()).sum::<f32>() <= 1e-4 {
-        return q0;
+    // Both sides computed and one chosen, so that [`slerp_panel`]'s loop vectorises.
+    let n = normalize4(r);
+    let tiny = r[0].abs() + r[1].abs() + r[2].abs() + r[3].abs() <= 1e-4;
+    std::array::from_fn(|a| if tiny { q0[a] } else { n[a] })
+}
+
+/// A panel's quaternions, component by component (`[component][row]`).
+pub type QuatPanel = [[f32; PANEL]; 4];
+
+/// [`slerp_from_sines`] for every row of a panel (the same bits, in SIMD lanes): keys `q0`,
+/// `q1`, `s = sin ω` and the two sines per row; rows past the caller's count may hold anything.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+pub fn slerp_panel(
+    q0: &QuatPanel,
+    q1: &QuatPanel,
+    [s, sin0, sin1]: [&[f32; PANEL]; 3],
+    out: &mut QuatPanel,
+) {
+    for l in 0..PANEL {
+        let a = [q0[0][l], q0[1][l], q0[2][l], q0[3][l]];
+        let b = [q1[0][l], q1[1][l], q1[2][l], q1[3][l]];
+        let r = slerp_from_sines(a, b, s[l], sin0[l], sin1[l]);
+        for (c, v) in r.into_iter().enumerate() {
+            out[c][l] = v;
+        }
     }
-    normalize4(r)
 }
 
 /// The reference's `slerp_interpolate` on already normalised inputs.
@@ -103,5 +128,47 @@ mod tests {
         // Opposite quaternions (no shortest-arc flip): finite.
         let o = slerp_reference(a, [-1.0, 0.0, 0.0, 0.0], 0.5);
         assert!(o.iter().all(|v| v.is_finite()));
+    }
+
+    /// The panel's lanes give each row's [`slerp_blend`] bits, degenerate rows included.
+    #[test]
+    fn slerp_panel_gives_the_rows_bits() {
+        let mut rng = fastrand::Rng::with_seed(3);
+        let mut quat = |i: usize| -> [f32; 4] {
+            match i % 7 {
+                0 => [0.0; 4],
+                1 => [1.0, 0.0, 0.0, 0.0],
+                2 => [-1.0, 0.0, 0.0, 0.0],
+                _ => normalize4(std::array::from_fn(|_| rng.f32() * 2.0 - 1.0)),
+            }
+        };
+        let rows: Vec<([f32; 4], [f32; 4], f32)> = (0..40 * PANEL)
+            .map(|i| (quat(i), quat(i / 3), (i % 11) as f32 / 10.0))
+            .collect();
+        for chunk in rows.chunks(PANEL) {
+            let d = chunk[0].2;
+            let (mut q0, mut q1, mut out) =
+                ([[0f32; PANEL]; 4], [[0f32; PANEL]; 4], [[0f32; PANEL]; 4]);
+            let (mut s, mut s0, mut s1) = ([0f32; PANEL], [0f32; PANEL], [0f32; PANEL]);
+            for (l, &(a, b, _)) in chunk.iter().enumerate() {
+                let [omega, sin_omega] = slerp_angle(a, b);
+                let (a0, a1) = slerp_arguments(omega, d);
+                for c in 0..4 {
+                    q0[c][l] = a[c];
+                    q1[c][l] = b[c];
+                }
+                (s[l], s0[l], s1[l]) = (sin_omega, sin_f32(a0), sin_f32(a1));
+            }
+            slerp_panel(&q0, &q1, [&s, &s0, &s1], &mut out);
+            for (l, &(a, b, _)) in chunk.iter().enumerate() {
+                let want = slerp_blend(a, b, slerp_angle(a, b), d);
+                let got = [out[0][l], out[1][l], out[2][l], out[3][l]];
+                assert_eq!(
+                    got.map(f32::to_bits),
+                    want.map(f32::to_bits),
+                    "{a:?} {b:?} {d}"
+                );
+            }
+        }
     }
 }
