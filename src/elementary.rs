@@ -220,6 +220,7 @@ fn sin_core(x: f64) -> f64 {
 }
 
 /// `asin y` for `|y| <= 1/2` by its Taylor series in `z = y^2`.
+#[inline(always)]
 fn asin_small(y: f64) -> f64 {
     let z = y * y;
     let mut p = 0.0;
@@ -231,17 +232,35 @@ fn asin_small(y: f64) -> f64 {
 
 /// `acos x` in `[0, π]`, binary64; outside `[-1, 1]` or NaN: NaN.
 pub fn acos(x: f64) -> f64 {
-    if x.is_nan() || !(-1.0..=1.0).contains(&x) {
-        return f64::NAN;
+    acos_core(x)
+}
+
+/// [`acos`] of every value in place: the same bits, in SIMD lanes where the CPU has them.
+#[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+pub fn acos_lanes(values: &mut [f64]) {
+    for x in values.iter_mut() {
+        *x = acos_core(*x);
     }
+}
+
+/// Appendix B's `acos`, branch-free so that it vectorises: the series' argument and the
+/// result's form are chosen by selects. Beyond `1/2`, `1 - |x|` is the spec's `1 - x` for
+/// `x > 0` and its `1 + x` for `x < 0` (the same binary64 operation).
+#[inline(always)]
+fn acos_core(x: f64) -> f64 {
     use std::f64::consts::{FRAC_PI_2, PI};
-    if x.abs() <= 0.5 {
-        FRAC_PI_2 - asin_small(x)
-    } else if x > 0.0 {
-        // 1 - x is exact for x in [1/2, 1] (Sterbenz); halving is exact.
-        2.0 * asin_small(((1.0 - x) * 0.5).sqrt())
+    let a = x.abs();
+    let middle = a <= 0.5;
+    // 1 - |x| is exact for |x| in [1/2, 1] (Sterbenz); halving is exact.
+    let y = if middle { x } else { ((1.0 - a) * 0.5).sqrt() };
+    let p = asin_small(y);
+    let ends = if x > 0.0 { 2.0 * p } else { PI - 2.0 * p };
+    let v = if middle { FRAC_PI_2 - p } else { ends };
+    if a <= 1.0 {
+        v
     } else {
-        PI - 2.0 * asin_small(((1.0 + x) * 0.5).sqrt())
+        // Outside [-1, 1], and NaN (which fails every comparison).
+        f64::NAN
     }
 }
 
@@ -377,6 +396,36 @@ mod tests {
             (-two.powi(70), 0.0),
         ] {
             assert_eq!(quadrant(k), q, "{k:e} mod 4");
+        }
+    }
+
+    /// The lanes give [`acos`]'s bits on `[-1, 1]`, at its branch points and outside.
+    #[test]
+    fn acos_lanes_give_the_same_bits_as_acos() {
+        let mut rng = fastrand::Rng::with_seed(10);
+        let mut xs: Vec<f64> = (0..100_000)
+            .map(|i| match i % 3 {
+                0 => rng.f64() * 2.0 - 1.0,
+                1 => 1.0 - rng.f64() * 1e-3,
+                _ => f64::from_bits(rng.u64(..)),
+            })
+            .collect();
+        for b in [0.5f64, -0.5, 1.0, -1.0, 0.0, -0.0, 1.0 - 1e-4, -1.0 + 1e-4] {
+            xs.extend([
+                b,
+                f64::from_bits(b.to_bits() + 1),
+                f64::from_bits(b.to_bits().wrapping_sub(1)),
+            ]);
+        }
+        xs.extend([1.5, -1.5, f64::INFINITY, f64::NEG_INFINITY, f64::NAN]);
+        let mut lanes = xs.clone();
+        acos_lanes(&mut lanes);
+        for (x, got) in xs.iter().zip(&lanes) {
+            let want = acos(*x);
+            assert!(
+                got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                "acos({x:e}): lanes {got:e}, scalar {want:e}"
+            );
         }
     }
 

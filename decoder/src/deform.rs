@@ -14,7 +14,7 @@ use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
 use dlgs::{Error, Result};
 use rayon::prelude::*;
 
-use crate::interp::{hermite, normalize4, slerp_angle, slerp_arguments, slerp_panel};
+use crate::interp::{hermite, normalize4, slerp_angles, slerp_arguments, slerp_panel};
 use crate::panel::{PanelMlp, Scratch, PANEL};
 use crate::planar::PlanarFeatures;
 
@@ -189,11 +189,12 @@ impl Deformer {
         let geo = self.geometry.as_ref().expect("reference model");
         geo.angles[k].get_or_init(|| {
             let (a, b) = (self.key(canon, k), self.key(canon, k + 1));
-            a.quat
-                .par_iter()
-                .zip(&b.quat)
-                .map(|(&qa, &qb)| slerp_angle(qa, qb))
-                .collect()
+            let mut angles = vec![[0f32; 2]; a.quat.len()];
+            angles
+                .par_chunks_mut(BLOCK)
+                .zip(a.quat.par_chunks(BLOCK).zip(b.quat.par_chunks(BLOCK)))
+                .for_each(|(out, (qa, qb))| slerp_angles(qa, qb, out));
+            angles
         })
     }
 

@@ -2,7 +2,7 @@
 //! including its guards. `sin` and `acos` are the format crate's own (Appendix B), so a frame
 //! has the same bits on every platform.
 
-use dlgs::elementary::{acos_f32, sin_f32};
+use dlgs::elementary::{acos_f32, acos_lanes, sin_f32, sin_lanes};
 use multiversion::multiversion;
 
 use crate::panel::PANEL;
@@ -36,6 +36,28 @@ pub fn slerp_angle(q0: [f32; 4], q1: [f32; 4]) -> [f32; 2] {
         .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
     let omega = acos_f32(dot).max(1e-4);
     [omega, sin_f32(omega).max(1e-4)]
+}
+
+/// [`slerp_angle`] of every pair of rows (the same bits), the `acos` and `sin` in SIMD lanes.
+pub fn slerp_angles(q0: &[[f32; 4]], q1: &[[f32; 4]], out: &mut [[f32; 2]]) {
+    let mut v: Vec<f64> = q0
+        .iter()
+        .zip(q1)
+        .map(|(a, b)| {
+            let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3])
+                .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
+            dot as f64
+        })
+        .collect();
+    acos_lanes(&mut v);
+    for (x, o) in v.iter_mut().zip(out.iter_mut()) {
+        o[0] = (*x as f32).max(1e-4);
+        *x = o[0] as f64;
+    }
+    sin_lanes(&mut v);
+    for (x, o) in v.iter().zip(out.iter_mut()) {
+        o[1] = (*x as f32).max(1e-4);
+    }
 }
 
 /// The blend part of `slerp_interpolate`, given [`slerp_angle`]`(q0, q1)`: weights renormalised
@@ -128,6 +150,36 @@ mod tests {
         // Opposite quaternions (no shortest-arc flip): finite.
         let o = slerp_reference(a, [-1.0, 0.0, 0.0, 0.0], 0.5);
         assert!(o.iter().all(|v| v.is_finite()));
+    }
+
+    /// The lanes give each pair's [`slerp_angle`] bits.
+    #[test]
+    fn slerp_angles_give_the_pairs_bits() {
+        let mut rng = fastrand::Rng::with_seed(4);
+        let q: Vec<[f32; 4]> = (0..2000)
+            .map(|i| match i % 9 {
+                0 => [0.0; 4],
+                1 => [1.0, 0.0, 0.0, 0.0],
+                2 => [-1.0, 0.0, 0.0, 0.0],
+                _ => normalize4(std::array::from_fn(|_| rng.f32() * 2.0 - 1.0)),
+            })
+            .collect();
+        let (a, b) = q.split_at(1000);
+        let mut out = vec![[0f32; 2]; 1000];
+        slerp_angles(a, b, &mut out);
+        for ((qa, qb), got) in a.iter().zip(b).zip(&out) {
+            let want = slerp_angle(*qa, *qb);
+            assert_eq!(
+                got.map(f32::to_bits),
+                want.map(f32::to_bits),
+                "{qa:?} {qb:?}"
+            );
+        }
+        // The same quaternion twice (dot clamped below 1), and opposite ones.
+        let mut one = [[0f32; 2]; 2];
+        slerp_angles(&[a[3], a[1]], &[a[3], a[2]], &mut one);
+        assert_eq!(one[0], slerp_angle(a[3], a[3]));
+        assert_eq!(one[1], slerp_angle(a[1], a[2]));
     }
 
     /// The panel's lanes give each row's [`slerp_blend`] bits, degenerate rows included.
