@@ -2,6 +2,7 @@
 
 mod cameras_arg;
 mod codec_args;
+mod codec_config;
 mod encode_cmd;
 mod export_cmd;
 mod hac_ingest_cmd;
