@@ -208,10 +208,10 @@ fn sin_core(x: f64) -> f64 {
     }
     let (s, c) = (r + r * ps, 1.0 + pc);
     // By k mod 4: s, c, -s, -c (selects, so that the loop vectorises).
-    let quadrant = quadrant(k);
-    let odd = (quadrant == 1.0) | (quadrant == 3.0);
+    let q = quadrant(k);
+    let odd = (q == 1.0) | (q == 3.0);
     let v = if odd { c } else { s };
-    let v = if quadrant >= 2.0 { -v } else { v };
+    let v = if q >= 2.0 { -v } else { v };
     if x.is_finite() {
         v
     } else {

@@ -442,9 +442,8 @@ impl Deformer {
         // Geometry.
         match geo {
             Some((ga, gb, angles)) => {
-                // The slerp's sines a panel at a time, in SIMD lanes (the same bits as one by
-                // one): `sin((1 - d) ω)` of the panel's rows, then `sin(d ω)`.
-                // Then the blend a panel at a time, also in lanes.
+                // The slerp a panel at a time, in SIMD lanes (the same bits as row by row):
+                // `sin((1 - d) ω)` of the panel's rows, then `sin(d ω)`, then the blend.
                 let mut sines = [0f64; 2 * PANEL];
                 let (mut q0, mut q1, mut q) =
                     ([[0f32; PANEL]; 4], [[0f32; PANEL]; 4], [[0f32; PANEL]; 4]);

@@ -6,6 +6,10 @@
 
 use std::collections::HashMap;
 
+/// Escaped slice bytes read for a header: the fields up to `slice_pic_order_cnt_lsb` take at
+/// most 158 bits, and 64 escaped bytes hold at least 42 unescaped ones.
+const SLICE_HEAD: usize = 64;
+
 /// The output order of a stream of one picture per packet: `display[i]` is the output index
 /// of the picture in packet `i` (its picture order count), when every count can be read, they
 /// are `0..n` each once, and no count wraps (`MaxPicOrderCntLsb >= 2n`, so each count is its
@@ -21,18 +25,23 @@ pub fn display_order(packets: &[Vec<u8>]) -> Option<Vec<usize>> {
             if nal.len() < 2 {
                 continue;
             }
-            let rbsp = unescape(&nal[2..]);
+            let payload = &nal[2..];
             match (nal[0] >> 1) & 0x3f {
                 33 => {
-                    let s = parse_sps(&rbsp)?;
+                    let s = parse_sps(&unescape(payload))?;
                     sps.insert(s.id, s);
                 }
                 34 => {
-                    let q = parse_pps(&rbsp)?;
+                    let q = parse_pps(&unescape(payload))?;
                     pps.insert(q.id, q);
                 }
-                // The first VCL unit of an access unit is its picture's first slice.
-                ty @ 0..=31 if poc.is_none() => poc = Some(slice_poc(ty, &rbsp, &sps, &pps)?),
+                // The first VCL unit of an access unit is its picture's first slice. Its header
+                // up to the picture order count is at most about 20 bytes, so only the start of
+                // the slice (not the picture's data) is unescaped.
+                ty @ 0..=31 if poc.is_none() => {
+                    let head = unescape(&payload[..payload.len().min(SLICE_HEAD)]);
+                    poc = Some(slice_poc(ty, &head, &sps, &pps)?);
+                }
                 _ => {}
             }
         }

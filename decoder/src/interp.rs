@@ -32,22 +32,22 @@ pub fn hermite(p0: [f32; 3], m0: [f32; 3], p1: [f32; 3], m1: [f32; 3], d: f32) -
 /// GOP.
 #[inline]
 pub fn slerp_angle(q0: [f32; 4], q1: [f32; 4]) -> [f32; 2] {
-    let dot = (q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3])
-        .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
-    let omega = acos_f32(dot).max(1e-4);
+    let omega = acos_f32(clamped_dot(q0, q1)).max(1e-4);
     [omega, sin_f32(omega).max(1e-4)]
 }
 
+/// The keys' dot product, clamped inside `(-1, 1)` as the reference does before `acos`.
+#[inline]
+fn clamped_dot(q0: [f32; 4], q1: [f32; 4]) -> f32 {
+    (q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]).clamp(-1.0 + 1e-4, 1.0 - 1e-4)
+}
+
 /// [`slerp_angle`] of every pair of rows (the same bits), the `acos` and `sin` in SIMD lanes.
-pub fn slerp_angles(q0: &[[f32; 4]], q1: &[[f32; 4]], out: &mut [[f32; 2]]) {
+pub(crate) fn slerp_angles(q0: &[[f32; 4]], q1: &[[f32; 4]], out: &mut [[f32; 2]]) {
     let mut v: Vec<f64> = q0
         .iter()
         .zip(q1)
-        .map(|(a, b)| {
-            let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3])
-                .clamp(-1.0 + 1e-4, 1.0 - 1e-4);
-            dot as f64
-        })
+        .map(|(&a, &b)| clamped_dot(a, b) as f64)
         .collect();
     acos_lanes(&mut v);
     for (x, o) in v.iter_mut().zip(out.iter_mut()) {
@@ -70,14 +70,20 @@ pub fn slerp_blend(q0: [f32; 4], q1: [f32; 4], [omega, s]: [f32; 2], d: f32) -> 
 
 /// The two angles whose sines [`slerp_blend`] takes: `(1 - d) ω` and `d ω`.
 #[inline]
-pub fn slerp_arguments(omega: f32, d: f32) -> (f32, f32) {
+pub(crate) fn slerp_arguments(omega: f32, d: f32) -> (f32, f32) {
     ((1.0 - d) * omega, d * omega)
 }
 
 /// [`slerp_blend`] given `sin32` of [`slerp_arguments`] (e.g. from
 /// `dlgs::elementary::sin_lanes`, the same bits) and `s = sin ω`.
 #[inline]
-pub fn slerp_from_sines(q0: [f32; 4], q1: [f32; 4], s: f32, sin0: f32, sin1: f32) -> [f32; 4] {
+pub(crate) fn slerp_from_sines(
+    q0: [f32; 4],
+    q1: [f32; 4],
+    s: f32,
+    sin0: f32,
+    sin1: f32,
+) -> [f32; 4] {
     let mut p0 = sin0 / s;
     let mut p1 = sin1 / s;
     let sum = (p0 + p1).max(1e-4);
@@ -91,12 +97,12 @@ pub fn slerp_from_sines(q0: [f32; 4], q1: [f32; 4], s: f32, sin0: f32, sin1: f32
 }
 
 /// A panel's quaternions, component by component (`[component][row]`).
-pub type QuatPanel = [[f32; PANEL]; 4];
+pub(crate) type QuatPanel = [[f32; PANEL]; 4];
 
 /// [`slerp_from_sines`] for every row of a panel (the same bits, in SIMD lanes): keys `q0`,
 /// `q1`, `s = sin ω` and the two sines per row; rows past the caller's count may hold anything.
 #[multiversion(targets("x86_64+avx512f+avx512vl+avx2+fma", "x86_64+avx2+fma", "aarch64+neon"))]
-pub fn slerp_panel(
+pub(crate) fn slerp_panel(
     q0: &QuatPanel,
     q1: &QuatPanel,
     [s, sin0, sin1]: [&[f32; PANEL]; 3],

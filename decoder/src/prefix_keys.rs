@@ -117,17 +117,15 @@ impl PrefixKeys {
     /// Decode the first `m` packets on their own (any decoder): the pictures they hold, in
     /// output order, fill their keys' slots. A prefix of at most half the stream is decoded on
     /// one thread: it is a first request, which runs beside the GOP's state decode (a longer one
-    /// gains more from FFmpeg's frame threads than the state loses to them: cold seeks on the
-    /// 273k parallel-mode file, docs/benchmarks/residuals-seek.md).
+    /// gains more from FFmpeg's threads than the state loses to them: cold seeks on the 273k
+    /// parallel-mode file, docs/benchmarks/residuals-seek.md).
     fn fill_from_prefix(&self, m: usize, slots: &[OnceLock<Vec<f32>>]) -> Result<()> {
         let refs: Vec<&[u8]> = self.packets[..m].iter().map(|v| v.as_slice()).collect();
         let beside = 2 * m <= self.packets.len();
         let pictures = key_pictures(self.hevc.as_ref(), &refs, &self.tiling, m, self.at, beside)?;
-        let mut keys: Vec<usize> = (0..self.tiling.keys)
-            .filter(|&k| self.position[k] < m)
-            .collect();
-        keys.sort_unstable();
-        for (k, picture) in keys.into_iter().zip(&pictures) {
+        // The prefix's pictures come out in key order.
+        let keys = (0..self.tiling.keys).filter(|&k| self.position[k] < m);
+        for (k, picture) in keys.zip(&pictures) {
             if slots[k].get().is_none() {
                 let _ = slots[k].set(self.untile(picture));
             }

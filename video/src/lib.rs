@@ -237,8 +237,8 @@ pub fn decode_gray12(
     decode_gray12_on(packets, width, height, expect_frames, 0)
 }
 
-/// [`decode_gray12`] with FFmpeg's thread count: 0 = automatic (frame and wavefront threads),
-/// 1 = the calling thread only (for a decode that runs beside other work on the other cores).
+/// [`decode_gray12`] with FFmpeg's thread count: 0 = automatic (wavefront threads), 1 = the
+/// calling thread only (for a decode that runs beside other work on the other cores).
 pub fn decode_gray12_on(
     packets: &[&[u8]],
     width: u32,
