@@ -21,6 +21,7 @@ mod scene_io;
 mod seek_cmd;
 mod sequence_cmd;
 mod synth_cmd;
+mod synth_frames_cmd;
 
 use std::path::PathBuf;
 
@@ -130,6 +131,9 @@ enum Cmd {
     /// available here): a compact subset moves, driven by smooth time features and random
     /// calibrated decoders.
     Synth(synth_cmd::SynthArgs),
+    /// Write a hard per-frame sequence from a real scene with SYNTHETIC motion (large rigid or
+    /// fast articulated motion, Gaussians that come and go), each frame shuffled, as PLYs.
+    SynthFrames(synth_frames_cmd::SynthFramesArgs),
     /// Decode the Gaussians shown at time t into an INRIA PLY (with language extras if present).
     Decode {
         file: PathBuf,
@@ -332,6 +336,7 @@ fn main() -> Result<()> {
         } => seek_cmd::run_seek(&file, count, seed, gop_cache),
         Cmd::Boundaries { a, b, cams } => seek_cmd::run_boundaries(&a, &b, &cams),
         Cmd::Synth(args) => synth_cmd::run_synth(&args),
+        Cmd::SynthFrames(args) => synth_frames_cmd::run(&args),
         Cmd::Decode { file, t, output } => export_cmd::run_decode(&file, t, &output),
         Cmd::Query(a) => query_cmd::run_query(&a),
         Cmd::Labels(a) => query_cmd::run_labels(&a),

@@ -32,14 +32,20 @@ pub struct SequenceArgs {
         default_value_t = 10
     )]
     pub key_interval: u32,
-    /// Refuse a sequence when fewer than this share of Gaussians match confidently between
-    /// two consecutive frames (0-1).
+    /// Two consecutive frames whose matched Gaussians match confidently less often than this
+    /// share (0-1), or that match less than half their Gaussians, have no consistent
+    /// correspondence: every track ends there and new ones begin (a cut, reported), or with
+    /// --no-cuts the sequence is refused.
     #[arg(
         help_heading = "Sequences (per-frame files)",
         long,
         default_value_t = 0.9
     )]
     pub min_confident: f64,
+    /// Refuse a sequence with a pair of frames that cannot be matched, instead of starting new
+    /// tracks there.
+    #[arg(help_heading = "Sequences (per-frame files)", long)]
+    pub no_cuts: bool,
     /// GOPs after the first carry explicit residuals (RDLT) instead of the default fitted
     /// binary voxel residual field (RNTC). `--residual-mode intra` sends every GOP's canonical
     /// Gaussians instead (random access without a residual chain, more bytes).
@@ -185,6 +191,7 @@ pub fn run_sequence(
         gop_length: seq.gop_length,
         key_interval: seq.key_interval,
         min_confident: seq.min_confident,
+        allow_cuts: !seq.no_cuts,
         residual_mode: mode,
         refresh_interval: refresh_interval(codec.refresh, mode)?,
         residual_field: (!seq.explicit_residuals).then(|| NtcFitSettings {
@@ -275,34 +282,67 @@ pub fn run_sequence(
 }
 
 fn print_report(r: &SequenceReport, files: &[PathBuf], fit_s: f64, total_s: f64) {
+    let name = |t: usize| {
+        files[t]
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .to_string()
+    };
+    let counts = if r.min_count == r.max_count {
+        format!("{} Gaussians", r.min_count)
+    } else {
+        format!("{}-{} Gaussians", r.min_count, r.max_count)
+    };
     println!(
-        "{} frames of {} Gaussians: {} static, {} dynamic; read, matched and fitted in {fit_s:.1} s, \
-         coded in {:.1} s",
+        "{} frames of {counts}: {} tracks' slots, {} static, {} dynamic ({} shown for part of the \
+         sequence); read, matched and fitted in {fit_s:.1} s, coded in {:.1} s",
         r.frames,
-        r.gaussians,
+        r.slots,
         r.n_static,
         r.n_dynamic,
+        r.partial,
         total_s - fit_s
     );
     if let Some(w) = r.worst_pair() {
-        let mean = r.pairs.iter().map(|p| p.confident_share).sum::<f64>() / r.pairs.len() as f64;
+        let n = r.pairs.len() as f64;
+        let mean = r.pairs.iter().map(|p| p.confident_share).sum::<f64>() / n;
+        let ratio = |p: &sequence::PairReport| p.median_distance / p.spacing.max(1e-12);
+        let fastest = r
+            .pairs
+            .iter()
+            .max_by(|a, b| ratio(a).total_cmp(&ratio(b)))
+            .expect("pairs");
         println!(
-            "correspondence: {:.2}% confident matches on average, worst {:.2}% ({} -> {}), \
-             largest move {:.3e}",
+            "correspondence: {:.2}% confident matches on average, worst {:.2}% ({} -> {}); \
+             largest move {:.3e}, median move up to {:.1}x the spacing ({} -> {}); {} births, {} \
+             deaths",
             100.0 * mean,
             100.0 * w.confident_share,
-            files[w.frame - 1]
-                .file_name()
-                .unwrap_or_default()
-                .to_string_lossy(),
-            files[w.frame]
-                .file_name()
-                .unwrap_or_default()
-                .to_string_lossy(),
+            name(w.frame - 1),
+            name(w.frame),
             r.pairs
                 .iter()
                 .map(|p| p.max_distance)
-                .fold(0.0f32, f32::max)
+                .fold(0.0f32, f32::max),
+            ratio(fastest),
+            name(fastest.frame - 1),
+            name(fastest.frame),
+            r.pairs.iter().map(|p| p.births).sum::<usize>(),
+            r.pairs.iter().map(|p| p.deaths).sum::<usize>(),
+        );
+    }
+    if !r.cuts.is_empty() {
+        println!(
+            "no consistent correspondence at {} frame(s) ({}): every track ended there and new \
+             ones began (--no-cuts refuses instead)",
+            r.cuts.len(),
+            r.cuts
+                .iter()
+                .take(8)
+                .map(|&t| format!("{} -> {}", name(t - 1), name(t)))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     for (g, f) in r.gops.iter().enumerate() {

@@ -4,9 +4,11 @@
 use std::sync::Arc;
 
 use dlgs::chunks::tfea::{self, TfeaBody, Tiling};
-use dlgs::chunks::{decode_canonical, decode_residual, mlpw, CANONICAL_CHUNKS, RESIDUAL_CHUNKS};
+use dlgs::chunks::{
+    decode_canonical, decode_residual, life, mlpw, CANONICAL_CHUNKS, RESIDUAL_CHUNKS,
+};
 use dlgs::container::{ChunkInfo, ChunkType, SceneHeader};
-use dlgs::model::DeformMlps;
+use dlgs::model::{DeformMlps, Lifetimes};
 use dlgs::{Error, FormatErrorKind, Limits, Result};
 
 use crate::hevc::SharedKeyPictureDecoder;
@@ -119,7 +121,12 @@ pub(crate) fn state(
 pub(crate) struct DynamicPayloads {
     tfea: (Vec<u8>, u64),
     mlpw: (Vec<u8>, u64),
+    /// `LIFE` (§6.14), when some Gaussians are shown for only part of the GOP.
+    life: Option<(Vec<u8>, u64)>,
 }
+
+/// A GOP's decoded time features, decoders and lifetimes.
+pub(crate) type DynamicParts = (PlanarFeatures, DeformMlps, Option<Lifetimes>);
 
 /// Read the dynamic payloads of a GOP (`None` when the scene has no dynamic Gaussians).
 pub(crate) fn dynamic_payloads(
@@ -136,10 +143,13 @@ pub(crate) fn dynamic_payloads(
             .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ty), gop_at))?;
         Ok((payload(&c)?, c.payload_offset()))
     };
-    Ok(Some(DynamicPayloads {
-        tfea: read(ChunkType::TFEA)?,
-        mlpw: read(ChunkType::MLPW)?,
-    }))
+    let tfea = read(ChunkType::TFEA)?;
+    let mlpw = read(ChunkType::MLPW)?;
+    let life = match find(chunks, ChunkType::LIFE) {
+        Some(c) => Some((payload(&c)?, c.payload_offset())),
+        None => None,
+    };
+    Ok(Some(DynamicPayloads { tfea, mlpw, life }))
 }
 
 /// Decode the time features (HEVC included) straight into the deformer's key- and
@@ -150,10 +160,15 @@ pub(crate) fn decode_dynamic(
     limits: &Limits,
     hevc: Option<&SharedKeyPictureDecoder>,
     p: &DynamicPayloads,
-) -> Result<(PlanarFeatures, DeformMlps)> {
+) -> Result<DynamicParts> {
     let features = decode_time_features(scene, limits, hevc, &p.tfea.0, p.tfea.1)?;
     let mlps = mlpw::decode(&p.mlpw.0, p.mlpw.1, scene, limits)?;
-    Ok((features, mlps))
+    let life = p
+        .life
+        .as_ref()
+        .map(|(b, at)| life::decode(b, *at, scene, limits))
+        .transpose()?;
+    Ok((features, mlps, life))
 }
 
 /// Decode a `TFEA` payload (at file offset `at`) into the key- and channel-major layout; HEVC
@@ -252,11 +267,12 @@ pub(crate) fn assemble(
     scene: &SceneHeader,
     g: u32,
     state: State,
-    dynamic: Option<(PlanarFeatures, DeformMlps)>,
+    dynamic: Option<DynamicParts>,
 ) -> DecodedGop {
     let canonical = state.canonical;
-    let deformer =
-        dynamic.map(|(features, mlps)| Deformer::from_planar(features, mlps, scene.deform_model));
+    let deformer = dynamic.map(|(features, mlps, life)| {
+        Deformer::from_planar(features, mlps, scene.deform_model).with_life(life)
+    });
     DecodedGop {
         index: g,
         canonical,

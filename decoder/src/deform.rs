@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use dlgs::container::header::DeformModel;
 use dlgs::elementary::sin_lanes;
-use dlgs::model::{DeformMlps, DynamicGop, Gaussians};
+use dlgs::model::{DeformMlps, DynamicGop, Gaussians, Lifetimes};
 use dlgs::{Error, Result};
 use rayon::prelude::*;
 
@@ -64,6 +64,8 @@ pub struct Deformer {
     lang: Option<PanelMlp>,
     scale_offsets: bool,
     geometry: Option<LazyGeometry>,
+    /// Gaussians shown for only part of the GOP (`LIFE`, §6.14).
+    life: Option<Lifetimes>,
 }
 
 fn block_ranges(n: usize) -> Vec<Range<usize>> {
@@ -123,7 +125,31 @@ impl Deformer {
     /// Prepare a GOP; for the reference model, the geometry decoders run on a key (`N` rows)
     /// the first time a frame needs it ([`Self::prepare_all_keys`] does all at once).
     pub fn new(gop: DynamicGop, model: DeformModel) -> Self {
-        Self::from_planar(PlanarFeatures::new(&gop.features), gop.mlps, model)
+        Self::from_planar(PlanarFeatures::new(&gop.features), gop.mlps, model).with_life(gop.life)
+    }
+
+    /// The GOP's lifetimes (§6.14): frames hide the Gaussians outside theirs.
+    pub fn with_life(mut self, life: Option<Lifetimes>) -> Self {
+        self.life = life;
+        self
+    }
+
+    /// The GOP's lifetimes, if some Gaussians are shown for only part of it.
+    pub fn life(&self) -> Option<&Lifetimes> {
+        self.life.as_ref()
+    }
+
+    /// Hide (§6.14) the Gaussians not shown at GOP-local frame `local_frame` in a frame's
+    /// opacities (nothing without `LIFE`).
+    pub fn hide_outside_life(
+        &self,
+        local_frame: u32,
+        opacity: &mut [f32],
+        lang_opacity: &mut [f32],
+    ) {
+        if let Some(l) = &self.life {
+            l.hide(local_frame, opacity, lang_opacity);
+        }
     }
 
     /// [`Self::new`] from time features already laid out key- and channel-major.
@@ -139,6 +165,7 @@ impl Deformer {
             lang: m.lang.as_ref().map(PanelMlp::new),
             scale_offsets: m.scale_offsets,
             geometry: None,
+            life: None,
             features,
             mlps,
         };
@@ -204,6 +231,7 @@ impl Deformer {
         Ok(DynamicGop {
             features: self.features.to_time_features()?,
             mlps: self.mlps.clone(),
+            life: self.life.clone(),
         })
     }
 

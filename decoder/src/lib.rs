@@ -67,7 +67,14 @@ impl DecodedGop {
     ) -> Result<Frame> {
         let canon = &gop.canonical.dynamics;
         match &gop.deformer {
-            Some(d) => d.frame_into(canon, time.key, time.delta, opts, &mut reuse)?,
+            Some(d) => {
+                d.frame_into(canon, time.key, time.delta, opts, &mut reuse)?;
+                d.hide_outside_life(
+                    time.local_frame,
+                    &mut reuse.opacity,
+                    &mut reuse.lang_opacity,
+                );
+            }
             None => reuse.clone_from(canon),
         }
         Ok(Frame {
@@ -228,7 +235,7 @@ impl<R: Read + Seek> Decoder<R> {
                     .as_ref()
                     .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), p))
                     .transpose()?;
-                if let Some((features, _)) = &dynamic {
+                if let Some((features, _, _)) = &dynamic {
                     features.ensure_keys(keys)?;
                 }
                 Ok(dynamic)
@@ -356,6 +363,12 @@ impl<R: Read + Seek> Decoder<R> {
             Some(d) if same_layout => {
                 let mut out = with_room(statics, canon.len());
                 d.frame_into_after(canon, time.key, time.delta, opts, &mut out, statics.len())?;
+                let lo = usize::from(out.has_language());
+                d.hide_outside_life(
+                    time.local_frame,
+                    &mut out.opacity[statics.len()..],
+                    &mut out.lang_opacity[statics.len() * lo..],
+                );
                 Ok(out)
             }
             _ => Ok(DecodedGop::frame(&gop, time, opts, Gaussians::default())?.merged()),
@@ -430,12 +443,14 @@ impl<R: Read + Seek> Decoder<R> {
             positions: pos_d,
             log_scales: sc_d,
             rotations: rot_d,
-            opacity: op_d,
-            lang_opacity: lop_d,
+            opacity: &mut *op_d,
+            lang_opacity: &mut *lop_d,
             sh: sh_d,
             lang: l_d,
         };
-        d.frame_into_slices(canon, time.key, time.delta, opts, dynamic)
+        d.frame_into_slices(canon, time.key, time.delta, opts, dynamic)?;
+        d.hide_outside_life(time.local_frame, op_d, lop_d);
+        Ok(())
     }
 }
 

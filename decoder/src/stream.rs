@@ -226,10 +226,9 @@ impl<R: Read> StreamDecoder<R> {
             let d = dynamic_payloads
                 .as_ref()
                 .map(|p| {
-                    let (features, mlps) =
-                        build::decode_dynamic(&scene, &limits, hevc.as_ref(), p)?;
-                    features.ensure_keys(keys.clone())?;
-                    Ok((features, mlps))
+                    let parts = build::decode_dynamic(&scene, &limits, hevc.as_ref(), p)?;
+                    parts.0.ensure_keys(keys.clone())?;
+                    Ok(parts)
                 })
                 .transpose();
             (d, t0.elapsed())

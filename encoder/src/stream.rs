@@ -211,6 +211,13 @@ impl<W: Write> StreamEncoder<W> {
             self.writer
                 .gop_chunk(ChunkType::MLPW, FLAG_MUST_UNDERSTAND, &mlpw)?;
         }
+        // Gaussians shown for only part of the GOP (§6.14, since 1.18).
+        if let Some(life) = dynamic.and_then(|d| d.life.as_ref()) {
+            let payload =
+                dlgs::chunks::life::encode(life, s.n_dynamic, self.cfg.container.zstd_level)?;
+            self.writer
+                .gop_chunk(ChunkType::LIFE, FLAG_MUST_UNDERSTAND, &payload)?;
+        }
         if g == 0 {
             self.first = decoded.clone();
         }

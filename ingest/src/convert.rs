@@ -78,6 +78,7 @@ pub fn encode<W: Write>(
         let dynamic = DynamicGop {
             features: gop.features.clone(),
             mlps: gop.mlps.clone(),
+            life: None,
         };
         let coded = match (&gop.feature_source, pass_through) {
             (

@@ -59,6 +59,7 @@ pub fn dynamic_from_py(
             lang: mlp(decoders, MlpRole::Lang)?,
             scale_offsets,
         },
+        life: None,
     })
 }
 

@@ -1,6 +1,6 @@
 //! The payload of each chunk type (format-spec §6), one module per chunk code: `craw` (§6.1),
 //! `tfea` (§6.2), `mlpw` (§6.3), `csog` (§6.5, with everything it is made of), `rntc` (§6.6),
-//! `rdlt` (§6.7), `laed` (§6.8); the Scaffold-GS variant's `ancr` (§6.9), `amlp` (§6.10) and
+//! `rdlt` (§6.7), `laed` (§6.8), `life` (§6.14); the Scaffold-GS variant's `ancr` (§6.9), `amlp` (§6.10) and
 //! `adef` (§6.11), whose MLPs share `scaffold_layers`. The entropy coders they share are in
 //! [`crate::entropy`].
 
@@ -11,6 +11,7 @@ pub mod ancr;
 pub mod craw;
 pub mod csog;
 pub mod laed;
+pub mod life;
 pub mod mlpw;
 pub mod rdlt;
 pub mod rntc;

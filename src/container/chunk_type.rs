@@ -33,6 +33,8 @@ impl ChunkType {
     pub const ADEF: ChunkType = ChunkType(*b"ADEF");
     /// Canonical anchors of a Scaffold-GS GOP, HAC-coded, §6.13.
     pub const AHAC: ChunkType = ChunkType(*b"AHAC");
+    /// The frames at which each dynamic Gaussian of a GOP is shown, §6.14.
+    pub const LIFE: ChunkType = ChunkType(*b"LIFE");
 
     pub fn is_valid(bytes: [u8; 4]) -> bool {
         bytes
@@ -74,6 +76,7 @@ pub const KNOWN_CHUNKS: &[ChunkType] = &[
     ChunkType::AMLP,
     ChunkType::ADEF,
     ChunkType::AHAC,
+    ChunkType::LIFE,
 ];
 
 pub fn is_known_chunk(t: ChunkType) -> bool {

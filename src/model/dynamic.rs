@@ -228,6 +228,8 @@ impl DeformMlps {
 pub struct DynamicGop {
     pub features: TimeFeatures,
     pub mlps: DeformMlps,
+    /// Gaussians shown for only part of the GOP (`LIFE`, §6.14); `None`: all at every frame.
+    pub life: Option<crate::model::Lifetimes>,
 }
 
 /// Reject NaN/Inf before anything is written (the encoder's promise in §6).
@@ -251,6 +253,8 @@ pub struct TimePoint {
     pub delta: f32,
     /// The frame index shown at `t`.
     pub frame: u32,
+    /// `frame`'s place in its GOP (`frame - gop × gop_length`): what `LIFE` (§6.14) compares.
+    pub local_frame: u32,
 }
 
 impl SceneHeader {
@@ -280,6 +284,7 @@ impl SceneHeader {
             key,
             delta,
             frame,
+            local_frame: frame.saturating_sub(gop * self.gop_length),
         })
     }
 }

@@ -5,6 +5,7 @@ pub mod gaussians;
 pub mod hac_cdf;
 pub mod hac_context;
 pub mod lang_decoder;
+pub mod lifetimes;
 pub mod ntc;
 mod ntc_config;
 mod ntc_lanes;
@@ -14,3 +15,4 @@ pub mod scaffold;
 
 pub use dynamic::{DeformMlps, DynamicGop, Layer, Mlp, MlpRole, TimeFeatures, TimePoint};
 pub use gaussians::{sh_coeffs, sigmoid, Canonical, Gaussians};
+pub use lifetimes::{Life, Lifetimes};

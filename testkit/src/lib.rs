@@ -8,4 +8,5 @@
 pub mod bench_scenes;
 pub mod code_layout;
 pub mod labels;
+pub mod motion;
 pub mod synth;

@@ -468,6 +468,7 @@ pub fn synth_dynamic(scene_g: &Gaussians, spec: &SynthSpec) -> Result<SynthModel
                 // As the reference: GOP 0 keeps canonical scales, later GOPs apply offsets.
                 scale_offsets: gop > 0,
             },
+            life: None,
         });
     }
     let canonical = Canonical { statics, dynamics };

@@ -5,7 +5,7 @@ use dlgs::chunks::craw::RawCodec;
 use dlgs::container::header::ResidualMode;
 use dlgs::Gaussians;
 use dlgs_decoder::{Decoder, FrameOptions};
-use dlgs_encoder::sequence::{self, match_frames, SequenceSettings};
+use dlgs_encoder::sequence::{self, match_joint, SequenceSettings};
 use dlgs_encoder::{CanonicalCodec, EncoderConfig, FeatureCodec};
 use dlgs_tests::data;
 
@@ -14,6 +14,17 @@ fn wave(frame: usize) -> Gaussians {
         "sequence/playcanvas_wave_200f/wave_{frame:04}.sog"
     ));
     dlgs::interop::read_splat_file(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// Which Gaussian of `a` each Gaussian of `b` continues (all matched).
+fn match_frames(a: &Gaussians, b: &Gaussians) -> (Vec<u32>, usize) {
+    let m = match_joint(a, &a.positions, b);
+    let prev: Vec<u32> = m
+        .prev_of
+        .iter()
+        .map(|p| p.expect("every Gaussian matched"))
+        .collect();
+    (prev, m.confident)
 }
 
 fn shuffled(g: &Gaussians, seed: u64) -> (Gaussians, Vec<usize>) {
@@ -31,22 +42,18 @@ fn shuffled(g: &Gaussians, seed: u64) -> (Gaussians, Vec<usize>) {
 #[test]
 fn a_known_shuffle_of_real_frames_is_recovered() {
     let (a, b) = (wave(1), wave(2));
-    let plain = match_frames(&a.positions, &b.positions).unwrap();
-    assert_eq!(
-        plain.confident,
-        a.len(),
-        "every match confident on real frames"
-    );
+    let (plain, confident) = match_frames(&a, &b);
+    assert_eq!(confident, a.len(), "every match confident on real frames");
     let (b2, perm) = shuffled(&b, 11);
-    let m = match_frames(&a.positions, &b2.positions).unwrap();
+    let (m, _) = match_frames(&a, &b2);
     for (j, &p) in perm.iter().enumerate() {
-        assert_eq!(m.prev_of[j], plain.prev_of[p], "shuffled Gaussian {j}");
+        assert_eq!(m[j], plain[p], "shuffled Gaussian {j}");
     }
     // A frame against a shuffle of itself: the shuffle, exactly.
     let (a2, perm) = shuffled(&a, 12);
-    let m = match_frames(&a.positions, &a2.positions).unwrap();
+    let (m, _) = match_frames(&a, &a2);
     let want: Vec<u32> = perm.iter().map(|&i| i as u32).collect();
-    assert_eq!(m.prev_of, want);
+    assert_eq!(m, want);
 }
 
 fn settings() -> SequenceSettings {
@@ -130,21 +137,21 @@ fn fit_and_check_clip(s: &SequenceSettings) -> Vec<u8> {
         language: false,
     };
     let got0 = dec.frame_at(0.0, &opts).unwrap();
-    let stored = match_frames(&frames[0].positions, &got0.dynamics.positions).unwrap();
-    let mut track = frames[0].positions.clone();
+    let (stored, _) = match_frames(&frames[0], &got0.dynamics);
+    let mut track = frames[0].clone();
     let mut worst = 0.0f32;
     for (t, f) in frames.iter().enumerate() {
         if t > 0 {
-            let m = match_frames(&track, &f.positions).unwrap();
+            let (m, _) = match_frames(&track, f);
             let mut next = track.clone();
-            for (j, &p) in m.prev_of.iter().enumerate() {
-                next[p as usize] = f.positions[j];
+            for (j, &p) in m.iter().enumerate() {
+                next.positions[p as usize] = f.positions[j];
             }
             track = next;
         }
         let got = dec.frame_at(t as f64 / 30.0, &opts).unwrap();
         for (j, a) in got.dynamics.positions.iter().enumerate() {
-            let b = track[stored.prev_of[j] as usize];
+            let b = track.positions[stored[j] as usize];
             for k in 0..3 {
                 worst = worst.max((a[k] - b[k]).abs());
             }
@@ -157,32 +164,59 @@ fn fit_and_check_clip(s: &SequenceSettings) -> Vec<u8> {
     bytes
 }
 
-/// Bad input is refused with the frame named.
+/// Bad input is refused with the frame named; frames that cannot be matched start new tracks
+/// (reported as a cut) or, with cuts not allowed, are refused.
 #[test]
 fn bad_sequences_are_refused_naming_the_frame() {
     let s = settings();
+    let mut frames: Vec<Gaussians> = (1..=4).map(wave).collect();
+    frames[3].positions[17][1] = f32::NAN;
+    let e = sequence::build(frames, &s, &mut |_, _, _| {}).unwrap_err();
+    assert!(e.to_string().contains("frame 3"), "{e}");
+    assert_eq!(e.name(), "InvalidInput");
+    // Frames with no consistent correspondence (each Gaussian moved by its own large amount).
+    let a = wave(1);
+    let mut b = a.clone();
+    for i in 0..b.len() {
+        b.positions[i][0] += 0.5 * (i % 7) as f32;
+    }
+    let strict = SequenceSettings {
+        allow_cuts: false,
+        ..s.clone()
+    };
+    let e = sequence::build(vec![a.clone(), b.clone()], &strict, &mut |_, _, _| {}).unwrap_err();
+    assert!(e.to_string().contains("match confidently"), "{e}");
+    let (model, report) = sequence::build(vec![a, b], &s, &mut |_, _, _| {}).unwrap();
+    assert_eq!(report.cuts, vec![1]);
+    assert_eq!(report.slots, 2 * 4225, "every track ended at the cut");
+    assert_eq!(model.scene.n_dynamic, 2 * 4225);
+    let e = sequence::build(vec![wave(1)], &s, &mut |_, _, _| {}).unwrap_err();
+    assert!(e.to_string().contains("at least 2 frames"), "{e}");
+}
+
+/// A Gaussian fewer in one frame is a death (and its slot is hidden from then on), not a
+/// refusal.
+#[test]
+fn a_frame_with_a_gaussian_fewer_is_a_death() {
     let mut frames: Vec<Gaussians> = (1..=4).map(wave).collect();
     let mut short = Gaussians::new(0, 0);
     for i in 1..frames[2].len() {
         short.push_from(&frames[2], i);
     }
     frames[2] = short;
-    let e = sequence::build(frames, &s, &mut |_, _, _| {}).unwrap_err();
-    assert!(e.to_string().contains("frame 2"), "{e}");
-    assert!(e.to_string().contains("4225 Gaussians, then 4224"), "{e}");
-    let mut frames: Vec<Gaussians> = (1..=4).map(wave).collect();
-    frames[3].positions[17][1] = f32::NAN;
-    let e = sequence::build(frames, &s, &mut |_, _, _| {}).unwrap_err();
-    assert!(e.to_string().contains("frame 3"), "{e}");
-    assert_eq!(e.name(), "InvalidInput");
-    // Frames too far apart to match (every other Gaussian swapped with its neighbour's place).
-    let a = wave(1);
-    let mut b = a.clone();
-    for i in 0..b.len() {
-        b.positions[i][0] += 0.5 * (i % 7) as f32;
+    // Frame 3 without the Gaussian that continues the one frame 2 lost (wave 3's first).
+    let (m, _) = match_frames(&wave(3), &wave(4));
+    let mut g = Gaussians::new(0, 0);
+    for (j, &p) in m.iter().enumerate() {
+        if p != 0 {
+            g.push_from(&wave(4), j);
+        }
     }
-    let e = sequence::build(vec![a, b], &s, &mut |_, _, _| {}).unwrap_err();
-    assert!(e.to_string().contains("match confidently"), "{e}");
-    let e = sequence::build(vec![wave(1)], &s, &mut |_, _, _| {}).unwrap_err();
-    assert!(e.to_string().contains("at least 2 frames"), "{e}");
+    frames[3] = g;
+    let (_, report) = sequence::build(frames, &settings(), &mut |_, _, _| {}).unwrap();
+    assert_eq!((report.min_count, report.max_count), (4224, 4225));
+    assert_eq!(report.pairs[1].deaths, 1, "{:?}", report.pairs[1]);
+    assert_eq!(report.pairs[1].births, 0);
+    assert_eq!(report.slots, 4225);
+    assert_eq!(report.partial, 1);
 }

@@ -327,7 +327,14 @@ pub fn fit_gop_to(
         shared_energy_kept: if total > 0.0 { kept / total } else { 1.0 },
         scale_offsets: scale_moves,
     };
-    (DynamicGop { features, mlps }, fit)
+    (
+        DynamicGop {
+            features,
+            mlps,
+            life: None,
+        },
+        fit,
+    )
 }
 
 /// The deformation model the fit produces.

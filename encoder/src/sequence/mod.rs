@@ -13,19 +13,22 @@
 //!    fitted to the change from the decoder's previous state, and time features refitted to
 //!    what that field gives.
 
-mod correspondence;
 mod fit;
+mod joint_match;
+mod kdtree;
 mod linalg;
 mod ntc_fit;
+mod tracks;
 
 use dlgs::container::header::ResidualMode;
 use dlgs::container::SceneHeader;
-use dlgs::model::{Canonical, DynamicGop, Gaussians};
+use dlgs::model::{Canonical, DynamicGop, Gaussians, Lifetimes};
 use dlgs::{Error, Result};
 
-pub use correspondence::{match_frames, FrameMatch};
 pub use fit::GopFit;
+pub use joint_match::{match_joint, spacing, JointMatch};
 pub use ntc_fit::{NtcFitReport, NtcFitSettings};
+pub use tracks::Tracks;
 
 /// How a sequence is cut and fitted.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,9 +39,14 @@ pub struct SequenceSettings {
     pub gop_length: u32,
     /// Frames between key time features (divides `gop_length`).
     pub key_interval: u32,
-    /// Refuse the sequence if a pair of consecutive frames matches with fewer confident matches
-    /// than this share (see [`match_frames`]).
+    /// A pair of consecutive frames whose matched Gaussians match confidently less often than
+    /// this share (see [`match_joint`]), or that match less than half their Gaussians, has no
+    /// consistent correspondence: new tracks begin there (`allow_cuts`) or the sequence is
+    /// refused.
     pub min_confident: f64,
+    /// Where two frames cannot be matched, end every track and begin new ones (reported as a
+    /// cut) instead of refusing the sequence.
+    pub allow_cuts: bool,
     /// How GOPs after the first carry their canonical state.
     pub residual_mode: ResidualMode,
     /// Sequential mode: every K-th GOP carries its full canonical state so that a cold seek
@@ -59,6 +67,7 @@ impl Default for SequenceSettings {
             gop_length: 60,
             key_interval: 10,
             min_confident: 0.9,
+            allow_cuts: true,
             residual_mode: ResidualMode::Sequential,
             refresh_interval: 0,
             residual_field: Some(NtcFitSettings::default()),
@@ -71,9 +80,19 @@ impl Default for SequenceSettings {
 pub struct PairReport {
     /// The later frame of the pair (0-based).
     pub frame: usize,
+    /// Confident matches among the matched pairs.
     pub confident_share: f64,
+    /// Matched pairs among the smaller frame's Gaussians.
     pub mutual_share: f64,
     pub max_distance: f32,
+    pub median_distance: f32,
+    /// Median nearest-neighbour distance in the earlier frame.
+    pub spacing: f32,
+    /// Gaussians of the later frame that begin a track, and of the earlier that end one.
+    pub births: usize,
+    pub deaths: usize,
+    /// No consistent correspondence: every track ended here (the fallback).
+    pub cut: bool,
 }
 
 /// What building the model found, for the user.
@@ -81,7 +100,17 @@ pub struct PairReport {
 pub struct SequenceReport {
     pub frames: usize,
     pub gop_length: usize,
+    /// Gaussians of the first frame.
     pub gaussians: usize,
+    /// Fewest and most Gaussians of a frame.
+    pub min_count: usize,
+    pub max_count: usize,
+    /// Dynamic and static Gaussians of the file (tracks share slots, see `tracks`).
+    pub slots: usize,
+    /// Slots shown for only part of the sequence.
+    pub partial: usize,
+    /// Frames where new tracks began because no consistent match existed.
+    pub cuts: Vec<usize>,
     pub n_static: usize,
     pub n_dynamic: usize,
     pub pairs: Vec<PairReport>,
@@ -109,8 +138,8 @@ pub struct SequenceModel {
 
 #[derive(Debug, Clone)]
 struct Refit {
-    /// Every frame in track order.
-    tracked: Vec<Gaussians>,
+    /// Per GOP, its frames (and the next GOP's first) with one row per slot.
+    filled: Vec<Vec<Gaussians>>,
     dyn_ids: Vec<usize>,
     settings: NtcFitSettings,
 }
@@ -127,43 +156,6 @@ pub struct WriteReport {
 
 /// Progress of [`build`]: (stage, done, total).
 pub type Progress<'a> = &'a mut dyn FnMut(&str, usize, usize);
-
-/// Match frame `t` onto the previous one and put it in track order (`Gaussian i` of the result
-/// continues Gaussian i of the previous frame's result).
-fn into_track_order(
-    prev: &Gaussians,
-    frame: &Gaussians,
-    t: usize,
-    s: &SequenceSettings,
-) -> Result<(Gaussians, PairReport)> {
-    let m = match_frames(&prev.positions, &frame.positions)
-        .map_err(|e| Error::input(format!("frame {t}: {e}; a .dlgs keeps one Gaussian count")))?;
-    if m.confident_share() < s.min_confident {
-        return Err(Error::input(format!(
-            "frames {} and {t}: only {:.1}% of the Gaussians match confidently (at least {:.1}% \
-             asked): the motion between frames is comparable to the spacing between Gaussians \
-             (give frames closer in time, or lower the floor knowing matches may be wrong)",
-            t - 1,
-            100.0 * m.confident_share(),
-            100.0 * s.min_confident
-        )));
-    }
-    let mut next_of = vec![0usize; frame.len()];
-    for (j, &p) in m.prev_of.iter().enumerate() {
-        next_of[p as usize] = j;
-    }
-    let mut out = Gaussians::new(frame.sh_degree, frame.lang_width);
-    for &j in &next_of {
-        out.push_from(frame, j);
-    }
-    let report = PairReport {
-        frame: t,
-        confident_share: m.confident_share(),
-        mutual_share: m.mutual as f64 / frame.len().max(1) as f64,
-        max_distance: m.max_distance,
-    };
-    Ok((out, report))
-}
 
 /// Whether a track changes visibly within a GOP: its position by more than a tenth of its
 /// size (largest axis) or 1e-5 of the scene, its colour by more than 1/255 in any channel
@@ -197,7 +189,7 @@ pub fn is_dynamic(frames: &[&Gaussians], i: usize, scene_size: f32) -> bool {
     })
 }
 
-/// Build the model of a sequence of frames (equal Gaussian counts, any sort order).
+/// Build the model of a sequence of frames (any Gaussian counts, any sort order).
 pub fn build(
     frames: Vec<Gaussians>,
     s: &SequenceSettings,
@@ -232,38 +224,59 @@ pub fn build(
         }
     }
     let total = frames.len();
-    let mut tracked: Vec<Gaussians> = Vec::with_capacity(total);
+    let l = s.gop_length as usize;
+    let intra = s.residual_mode == ResidualMode::Intra;
+    let ts = tracks::TrackSettings {
+        min_confident: s.min_confident,
+        allow_cuts: s.allow_cuts,
+        reuse_slots: intra,
+        gop_length: l,
+    };
+    let (tracks, pairs) = tracks::track(&frames, &ts, &mut |done, total| {
+        progress("matching frames", done, total)
+    })?;
     let mut report = SequenceReport {
         frames: total,
-        gop_length: s.gop_length as usize,
+        gop_length: l,
         gaussians: frames[0].len(),
+        min_count: frames.iter().map(Gaussians::len).min().unwrap_or(0),
+        max_count: frames.iter().map(Gaussians::len).max().unwrap_or(0),
+        slots: tracks.slots,
+        cuts: tracks.cuts.clone(),
+        pairs,
         ..Default::default()
     };
-    for (t, f) in frames.into_iter().enumerate() {
-        if t == 0 {
-            tracked.push(f);
-        } else {
-            let (g, pair) = into_track_order(&tracked[t - 1], &f, t, s)?;
-            tracked.push(g);
-            report.pairs.push(pair);
-        }
-        progress("matching frames", t + 1, total);
-    }
-    let l = s.gop_length as usize;
     let gop_count = total.div_ceil(l);
-    // The frames of GOP g: its own and the next GOP's first (the last key's anchor).
-    let gop_frames = |g: usize| -> Vec<&Gaussians> {
-        tracked[g * l..((g + 1) * l + 1).min(total)]
-            .iter()
-            .collect()
-    };
-    let scene_size = tracked[0]
+    // Per GOP: its frames and the next GOP's first (the last key's anchor), one row per slot.
+    let filled: Vec<Vec<Gaussians>> = (0..gop_count)
+        .map(|g| {
+            let start = g * l;
+            let end = ((g + 1) * l).min(total - 1);
+            let fr = tracks::fill(
+                &frames,
+                &tracks,
+                start,
+                l.min(total - start),
+                end,
+                s.key_interval as usize,
+            );
+            progress("filling tracks", g + 1, gop_count);
+            fr
+        })
+        .collect();
+    drop(frames);
+    let gop_frames = |g: usize| -> Vec<&Gaussians> { filled[g].iter().collect() };
+    let scene_size = filled[0][0]
         .bounds()
         .map(|(lo, hi)| (0..3).map(|a| hi[a] - lo[a]).fold(0.0f32, f32::max))
         .unwrap_or(0.0);
-    let n = tracked[0].len();
+    let n = tracks.slots;
+    let partial: Vec<bool> = (0..n)
+        .map(|i| (0..total).any(|t| !tracks.alive(t, i)))
+        .collect();
+    report.partial = partial.iter().filter(|&&p| p).count();
     let dynamic: Vec<bool> = (0..n)
-        .map(|i| (0..gop_count).any(|g| is_dynamic(&gop_frames(g), i, scene_size)))
+        .map(|i| partial[i] || (0..gop_count).any(|g| is_dynamic(&gop_frames(g), i, scene_size)))
         .collect();
     let mut dyn_ids: Vec<usize> = (0..n).filter(|&i| dynamic[i]).collect();
     // Dynamic Gaussians are stored in the order the time-feature tiles show them (row by row,
@@ -275,16 +288,16 @@ pub fn build(
         fit::CHANNELS,
     )
     .side;
-    let mut first = Gaussians::new(tracked[0].sh_degree, 0);
+    let mut first = Gaussians::new(filled[0][0].sh_degree, 0);
     for &i in &dyn_ids {
-        first.push_from(&tracked[0], i);
+        first.push_from(&filled[0][0], i);
     }
     let order = crate::grid_sort::grid_order_with_width(&first, crate::SortSpec::NONE, side);
     dyn_ids = order.iter().map(|&o| dyn_ids[o as usize]).collect();
     let static_ids: Vec<usize> = (0..n).filter(|&i| !dynamic[i]).collect();
     report.n_static = static_ids.len();
     report.n_dynamic = dyn_ids.len();
-    let sh_degree = tracked[0].sh_degree;
+    let sh_degree = filled[0][0].sh_degree;
     let scene = SceneHeader {
         residual_mode: s.residual_mode,
         deform_model: fit::DEFORM_MODEL,
@@ -312,14 +325,20 @@ pub fn build(
         for &i in &static_ids {
             statics.push_from(canonical, i);
         }
-        let (dynamics, field, fit) = fit::fit_gop(&fr, &dyn_ids, l, s.key_interval as usize);
+        let (dynamics, mut field, fit) = fit::fit_gop(&fr, &dyn_ids, l, s.key_interval as usize);
+        let frames_here = l.min(total - g * l);
+        let ranges: Vec<(u16, u16)> = dyn_ids
+            .iter()
+            .map(|&i| tracks.local_life(i, g * l, frames_here))
+            .collect();
+        field.life = Lifetimes::from_ranges(&ranges, frames_here as u16);
         gops.push((Canonical { statics, dynamics }, field));
         report.gops.push(fit);
         progress("fitting GOPs", g + 1, gop_count);
     }
     let refit = match (&s.residual_field, s.residual_mode) {
         (Some(f), m) if m != ResidualMode::Intra && !dyn_ids.is_empty() => Some(Refit {
-            tracked,
+            filled,
             dyn_ids,
             settings: f.clone(),
         }),
@@ -376,16 +395,15 @@ pub fn write_with_report<W: std::io::Write>(
             |i, _| progress("fitting residual fields", done + i, total),
         );
         let state = ntc.apply(&base)?;
-        let frames: Vec<&Gaussians> = r.tracked[g * l..((g + 1) * l + 1).min(r.tracked.len())]
-            .iter()
-            .collect();
-        let (refitted, gop_fit) = fit::fit_gop_to(
+        let frames: Vec<&Gaussians> = r.filled[g].iter().collect();
+        let (mut refitted, gop_fit) = fit::fit_gop_to(
             &frames,
             &r.dyn_ids,
             &state.dynamics,
             l,
             model.scene.key_interval as usize,
         );
+        refitted.life = field.life.clone();
         enc.push(crate::GopCanonical::Ntc(&ntc), Some(&refitted))?;
         report.field_gops.push(g);
         report.fields.push(fit_report);
