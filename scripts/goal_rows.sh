@@ -23,8 +23,8 @@
 # 2026-11-27 (18,870 B; about 3 min of encoding).
 # TARGET=1: instead of those options, each scene is coded with `--target-psnr <SOG's PSNR on the
 # benchmark views>`: the encoder's own search, on views of its own (docs/benchmarks/canonical-levers.md "Target PSNR").
-# EXTRA="OPTIONS": appended to every row's options (e.g. EXTRA=--fast-decode OUT=target/goal_rows_fast:
-# the same rows in files that decode faster, docs/benchmarks/decode.md "Decode time against SOG and SPZ").
+# EXTRA="OPTIONS": appended to every row's options (e.g. EXTRA=--max-compression OUT=target/goal_rows_max:
+# the same rows in files about 2 % smaller that decode about half as fast, docs/benchmarks/decode.md "Decode time against SOG and SPZ").
 # WIDE=N (default 32; WIDE=0 leaves it out): one more column, the mean PSNR over N orbit cameras (`dlgs
 # compare --orbit N`; the 8 default views are every (N/8)-th of them when N is a multiple of 8) for ours and SOG's:
 # a single view's PSNR moves by several dB with any change of levels at these qualities, so 8 views are a small

@@ -5,7 +5,7 @@
 #      12 / 20 / intra-only
 #      crf 6: bytes per frame, the features' share of a GOP decode (median over GOPs, from
 #      `dlgs play --max-speed --json`), and PSNR against the exact-feature model;
-#   2. canonical state: lossless / near-lossless / high / medium, and high with --fast-decode:
+#   2. canonical state: lossless / near-lossless / high / medium, and high with --max-compression:
 #      bytes, GOP 0 decode (decode_timing example, median of 7), PSNR against lossless;
 #   3. frames: colour, colour + language: frame decode mean from `dlgs play --max-speed`.
 # The renderer's knobs have their own table in docs/benchmarks/render.md.
@@ -53,7 +53,7 @@ echo "## Canonical state (the still scene)"
 echo "| setting | bytes | GOP 0 decode, median of 7 | PSNR vs lossless (8 views) |"
 echo "|---|---|---|---|"
 $dlgs encode "$scene" -o "$work/lossless.dlgs" --quality lossless >/dev/null
-for setting in "--quality lossless" "--quality near-lossless" "--quality high" "--quality high --fast-decode" "--quality medium" "--quality medium --fast-decode"; do
+for setting in "--quality lossless" "--quality near-lossless" "--quality high" "--quality high --max-compression" "--quality medium" "--quality medium --max-compression"; do
   # shellcheck disable=SC2086
   $dlgs encode "$scene" -o "$work/c.dlgs" $setting >/dev/null
   bytes=$(stat -c %s "$work/c.dlgs")

@@ -75,25 +75,35 @@ pub struct CodecArgs {
     /// name should not travel with them, or where every byte counts.
     #[arg(long)]
     pub no_meta: bool,
-    /// Lossy canonical coding: leave out codec 5's mixed-context modes, which code some
-    /// channels 1-5 % smaller but decode about 3 times slower per channel. The same quantised
-    /// values (so the same PSNR) in files 1.5-3.1 % larger that decode in about half the time
-    /// or less (273k Gaussians: 105-136 instead of 237-331 ms on 2 cores;
-    /// docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Format unchanged: every
-    /// reader decodes both.
+    /// Lossy canonical coding: kept for scripts; fast decoding is the default since 2026-12-02
+    /// (codec 5's mixed-context modes left out). Conflicts with --max-compression.
     #[arg(
         help_heading = "Canonical coding (expert)",
         long,
-        conflicts_with = "mixed_margin"
+        conflicts_with_all = ["mixed_margin", "max_compression"]
     )]
     pub fast_decode: bool,
-    /// Lossy canonical coding: a channel takes codec 5's mixed-context modes only where they
-    /// are this many percent smaller than its best other coding. Between the default and
-    /// `--fast-decode`: the plant's goal row is 0.3 % larger with 2 and decodes 27 % faster,
-    /// 1.2 % larger with 5 and 43 % faster; the 273k scene's 0.2 % and 16 %, 1.1 % and 35 %
-    /// (docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Same values, same PSNR.
-    #[arg(help_heading = "Canonical coding (expert)", long, value_name = "PERCENT", default_value_t = 100.0 * grid_coder::MIXED_MARGIN)]
-    pub mixed_margin: f64,
+    /// Lossy canonical coding for archives: let channels take codec 5's mixed-context modes,
+    /// which code some channels 1-5 % smaller but decode about 3 times slower per channel. The
+    /// same quantised values (so the same PSNR) in files 2.0-2.1 % smaller that decode in about
+    /// twice the time (273k Gaussians on 2 cores: 192 instead of 100 ms;
+    /// docs/benchmarks/decode.md "Decode time against SOG and SPZ"). Format unchanged: every
+    /// reader decodes both.
+    #[arg(help_heading = "Canonical coding (expert)", long)]
+    pub max_compression: bool,
+    /// Lossy canonical coding: codec 5's mixed-context modes only where they are this many
+    /// percent smaller than a channel's best other coding (implies the modes; between the
+    /// default and --max-compression, which is 1). The plant's goal row is 0.3 % larger with 2
+    /// than with --max-compression and decodes 27 % faster, 1.2 % larger with 5 and 43 % faster;
+    /// the 273k scene's 0.2 % and 16 %, 1.1 % and 35 % (docs/benchmarks/decode.md). Same values,
+    /// same PSNR.
+    #[arg(
+        help_heading = "Canonical coding (expert)",
+        long,
+        value_name = "PERCENT",
+        conflicts_with = "max_compression"
+    )]
+    pub mixed_margin: Option<f64>,
     /// Still scenes: move up to MOVES bits between attribute groups, one at a time, where
     /// rendering the decoded scene (5 views of its own, not the benchmark's) says quality rises
     /// within the preset's bytes (0.25 % tolerance). Each move codes and renders about 15
@@ -335,17 +345,20 @@ impl CodecArgs {
         }
     }
 
-    /// Whether `--mixed-margin` was given a value other than its default.
+    /// Whether codec 5's mixed modes were asked for (`--max-compression` or `--mixed-margin`).
     pub(crate) fn mixed_margin_given(&self) -> bool {
-        self.mixed_margin != 100.0 * grid_coder::MIXED_MARGIN
+        self.max_compression || self.mixed_margin.is_some()
     }
 
-    /// The encoder's margin for codec 5's mixed modes: `None` with `--fast-decode`.
+    /// The encoder's margin for codec 5's mixed modes: `None` (fast decoding, the default)
+    /// unless `--max-compression` or `--mixed-margin` asks for them.
     pub(crate) fn mixed_margin(&self) -> Result<Option<f64>> {
-        if self.fast_decode {
-            return Ok(None);
+        if self.max_compression {
+            return Ok(Some(grid_coder::MIXED_MARGIN));
         }
-        let m = self.mixed_margin;
+        let Some(m) = self.mixed_margin else {
+            return Ok(None);
+        };
         if !(0.0..=100.0).contains(&m) {
             bail!("--mixed-margin {m}: expected a percentage from 0 to 100");
         }
@@ -393,8 +406,8 @@ impl CodecArgs {
             }
             ("lossless", None) if self.mixed_margin_given() => {
                 bail!(
-                    "--mixed-margin chooses among the lossy grid codings: give a lossy --quality \
-                     (or --bits, or --target-psnr)"
+                    "--max-compression and --mixed-margin choose among the lossy grid codings: \
+                     give a lossy --quality (or --bits, or --target-psnr)"
                 )
             }
             ("lossless", None) => return Ok(CanonicalCodec::Raw),

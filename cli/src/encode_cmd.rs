@@ -166,12 +166,10 @@ fn encode_to_target(
                 println!(
                     "  the same file from options: {}{}",
                     found.trials[i].options(&found.groups),
-                    if codec.fast_decode {
-                        " --fast-decode".to_owned()
-                    } else if codec.mixed_margin_given() {
-                        format!(" --mixed-margin {}", codec.mixed_margin)
-                    } else {
-                        String::new()
+                    match (codec.max_compression, codec.mixed_margin) {
+                        (true, _) => " --max-compression".to_owned(),
+                        (false, Some(m)) => format!(" --mixed-margin {m}"),
+                        (false, None) => String::new(),
                     }
                 );
                 let held_out = compare_views_psnr(g, &file)?;

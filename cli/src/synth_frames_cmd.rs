@@ -34,6 +34,10 @@ pub struct SynthFramesArgs {
     pub every: usize,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Also write each frame's identities (frame_NNNN.ids: per Gaussian of the frame, the u32
+    /// little-endian index of the scene Gaussian it is), for peers that need them and for tests.
+    #[arg(long)]
+    pub ids: bool,
 }
 
 pub fn run(a: &SynthFramesArgs) -> Result<()> {
@@ -61,6 +65,11 @@ pub fn run(a: &SynthFramesArgs) -> Result<()> {
         let p = a.output.join(format!("frame_{t:04}.ply"));
         std::fs::write(&p, dlgs::interop::ply::write_ply(f)?)
             .with_context(|| format!("writing {}", p.display()))?;
+        if a.ids {
+            let p = a.output.join(format!("frame_{t:04}.ids"));
+            let bytes: Vec<u8> = seq.ids[t].iter().flat_map(|i| i.to_le_bytes()).collect();
+            std::fs::write(&p, bytes).with_context(|| format!("writing {}", p.display()))?;
+        }
     }
     let counts: Vec<usize> = seq.frames.iter().map(|f| f.len()).collect();
     println!(

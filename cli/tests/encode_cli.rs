@@ -60,9 +60,10 @@ fn encode_octree_positions_by_default_and_grid_positions_on_request() {
 
 #[test]
 fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
-    // `--fast-decode` leaves codec 5's mixed modes out: on this real scene at `high` the
-    // default takes them (the file is smaller) and both decode to the same Gaussians, octree
-    // positions and grid positions (layout 1 then, one part) alike.
+    // The default (fast decoding, also `--fast-decode`) leaves codec 5's mixed modes out: on
+    // this real scene at `high` `--max-compression` takes them (the file is smaller) and both
+    // decode to the same Gaussians, octree positions and grid positions (layout 1 then, one
+    // part) alike.
     let tmp = tempfile::tempdir().unwrap();
     let scene = dlgs_tests::data(SCENE);
     let scene = scene.to_str().unwrap();
@@ -76,8 +77,14 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
     for extra in [&[][..], &["--grid-positions"][..]] {
         let (mixed, fast) = (path("mixed.dlgs"), path("fast.dlgs"));
         let e = ["encode", scene, "--quality", "high", "--no-meta"];
-        dlgs(&[&e[..], &["-o", &mixed], extra].concat());
-        dlgs(&[&e[..], &["-o", &fast, "--fast-decode"], extra].concat());
+        dlgs(&[&e[..], &["-o", &mixed, "--max-compression"], extra].concat());
+        dlgs(&[&e[..], &["-o", &fast], extra].concat());
+        let named = path("named.dlgs");
+        dlgs(&[&e[..], &["-o", &named, "--fast-decode"], extra].concat());
+        assert_eq!(
+            std::fs::read(&named).unwrap(),
+            std::fs::read(&fast).unwrap()
+        );
         assert!(
             size(&mixed) < size(&fast),
             "{extra:?}: {} vs {}",
@@ -126,12 +133,13 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
     assert!(err.contains("lossy --quality"), "{err}");
 
     // `--mixed-margin`: between the two. A 5 % margin lets fewer channels take the mixed
-    // modes than the default 1 %, for a file between the two sizes, with the same Gaussians.
+    // modes than --max-compression's 1 %, for a file between the two sizes, with the same
+    // Gaussians.
     let e = ["encode", scene, "--quality", "high", "--no-meta", "-o"];
     let (one, five, none) = (path("m1.dlgs"), path("m5.dlgs"), path("m0.dlgs"));
-    dlgs(&[&e[..], &[&one]].concat());
+    dlgs(&[&e[..], &[&one, "--max-compression"]].concat());
     dlgs(&[&e[..], &[&five, "--mixed-margin", "5"]].concat());
-    dlgs(&[&e[..], &[&none, "--fast-decode"]].concat());
+    dlgs(&[&e[..], &[&none]].concat());
     let mixed_records = |f: &str| {
         channel_info(f)["csog"][0]["records"]
             .as_array()
@@ -155,6 +163,8 @@ fn fast_decode_codes_the_same_levels_without_mixed_contexts() {
     assert!(ply(&one) == ply(&five));
     let x = path("x.dlgs");
     let err = dlgs_fails(&[&e[..], &[&x, "--mixed-margin", "5", "--fast-decode"]].concat());
+    assert!(err.contains("cannot be used with"), "{err}");
+    let err = dlgs_fails(&[&e[..], &[&x, "--mixed-margin", "5", "--max-compression"]].concat());
     assert!(err.contains("cannot be used with"), "{err}");
     let err = dlgs_fails(&[&e[..], &[&x, "--mixed-margin", "200"]].concat());
     assert!(err.contains("from 0 to 100"), "{err}");

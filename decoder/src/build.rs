@@ -69,7 +69,9 @@ pub(crate) fn check_pictures(pictures: &[Vec<u16>], tiling: &Tiling, at: u64) ->
 }
 
 /// Decode a GOP's canonical chunk, or apply its residual chunk to `base` (the reference GOP's
-/// state; `None` for GOPs without a reference).
+/// state; `None` for GOPs without a reference). `chunks` come from a container reader, which
+/// has checked §3.3's GOP rules: each type at most once, one residual chunk at most, a
+/// canonical chunk only without a reference GOP and a residual one only with one.
 pub(crate) fn state(
     scene: &SceneHeader,
     limits: &Limits,
@@ -78,15 +80,10 @@ pub(crate) fn state(
     base: Option<&State>,
     mut payload: impl FnMut(&ChunkInfo) -> Result<Vec<u8>>,
 ) -> Result<State> {
+    // CSOG before CRAW: a GOP holding both (which writers must not write) decodes its CSOG.
     let find_any = |set: &[ChunkType]| set.iter().find_map(|&ty| find(chunks, ty));
     let (canon, residual) = (find_any(&CANONICAL_CHUNKS), find_any(&RESIDUAL_CHUNKS));
     let Some(base) = base else {
-        if let Some(c) = residual {
-            return Err(Error::format(
-                FormatErrorKind::Order("a residual chunk in a GOP without a reference GOP"),
-                c.offset,
-            ));
-        }
         let c = canon
             .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ChunkType::CRAW), gop_at))?;
         let p = payload(&c)?;
@@ -98,12 +95,6 @@ pub(crate) fn state(
             ntc: None,
         });
     };
-    if let Some(c) = canon {
-        return Err(Error::format(
-            FormatErrorKind::Order("a canonical chunk in a GOP that has a reference GOP"),
-            c.offset,
-        ));
-    }
     let c = residual
         .ok_or_else(|| Error::format(FormatErrorKind::MissingChunk(ChunkType::RDLT), gop_at))?;
     let p = payload(&c)?;

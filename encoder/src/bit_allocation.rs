@@ -122,9 +122,10 @@ impl Judge {
                 dynamic_bits: bits,
                 rotation_coarsening: self.coarsening,
                 compact_records: true,
-                // Bytes judged as the default coder makes them, also under `--fast-decode`
-                // or `--mixed-margin` (which add a few percent to every candidate alike).
-                mixed_margin: Some(dlgs::chunks::csog::grid_codecs::MIXED_MARGIN),
+                // Bytes judged as the default coder makes them (fast decoding, no mixed
+                // modes), also under `--max-compression` or `--mixed-margin` (which take a few
+                // percent off every candidate alike).
+                mixed_margin: None,
             };
             csog::encode_octree(&gop, self.zstd_level)?.0
         } else {

@@ -167,11 +167,11 @@ pub struct CanonicalSettings {
     /// layouts (the conformance vectors).
     pub compact_records: bool,
     /// Lossy (`CSOG`) scenes: let channels take codec 5's mixed-context modes where they code
-    /// smaller than any other coding by this fraction (format 1.13; default
-    /// [`MIXED_MARGIN`](dlgs::chunks::csog::grid_codecs::MIXED_MARGIN), `dlgs encode
-    /// --mixed-margin`). `None` (`dlgs encode --fast-decode`): the same values in files 1.5-3.1 %
-    /// larger that decode in about half the time (docs/benchmarks/decode.md "Decode time
-    /// against SOG and SPZ").
+    /// smaller than any other coding by this fraction (format 1.13; `dlgs encode
+    /// --max-compression` gives [`MIXED_MARGIN`](dlgs::chunks::csog::grid_codecs::MIXED_MARGIN),
+    /// `--mixed-margin` any other). `None`, the default since 2026-12-02 (issue 66): the same
+    /// values in files 1.5-3.1 % larger that decode in about half the time
+    /// (docs/benchmarks/decode.md "Decode time against SOG and SPZ").
     pub mixed_margin: Option<f64>,
 }
 
@@ -183,7 +183,9 @@ impl Default for CanonicalSettings {
             octree_positions: true,
             rotation_coarsening: Some(RotationCoarsening::DEFAULT),
             compact_records: true,
-            mixed_margin: Some(dlgs::chunks::csog::grid_codecs::MIXED_MARGIN),
+            // Fast decoding by default (decided 2026-12-02, issue 66): codec 5's mixed modes
+            // save 2.0-2.1 % of the canonical bytes but halve the decode speed.
+            mixed_margin: None,
         }
     }
 }

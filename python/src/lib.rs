@@ -60,6 +60,7 @@ fn encode_scene(
         fast_start: Default::default(),
         per_gop_range: false,
         mlp_f16: false,
+        max_compression: false,
         zstd_level,
         meta: config::meta_from_py(py, meta)?,
         lang_decoder: None,

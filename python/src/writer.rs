@@ -207,7 +207,7 @@ impl Writer {
         exact_features=false, lossless_features=false, intra_features=false, per_gop_range=false,
         mlp_f16=false, zstd_level=9, residual_mode="intra", deform_model="reference",
         gop_count=None, frame_count=None, meta=None, lang_decoder=None, negatives=None,
-        progress=None, fast_start="first"))]
+        progress=None, fast_start="first", max_compression=false))]
     fn py_new(
         py: Python<'_>,
         path: PathBuf,
@@ -231,6 +231,7 @@ impl Writer {
         negatives: Option<&Bound<'_, PyAny>>,
         progress: Option<PyObject>,
         fast_start: &str,
+        max_compression: bool,
     ) -> Res<Self> {
         let codec = CodecOptions {
             quality: quality.to_owned(),
@@ -242,6 +243,7 @@ impl Writer {
             fast_start: crate::config::parse_fast_start(fast_start)?,
             per_gop_range,
             mlp_f16,
+            max_compression,
             zstd_level,
             meta: crate::config::meta_from_py(py, meta)?,
             lang_decoder: crate::config::lang_decoder_from_py(lang_decoder, negatives)?,

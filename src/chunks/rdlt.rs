@@ -169,6 +169,16 @@ pub fn decode(
 ) -> Result<DeltaResidual> {
     let mut r = ByteReader::new(p, offset);
     let count = r.u8("RDLT group count")? as usize;
+    if count > AttrGroup::ALL.len() {
+        return Err(Error::payload(
+            ChunkType::RDLT,
+            format!(
+                "{count} groups (0..={}: each group at most once)",
+                AttrGroup::ALL.len()
+            ),
+            offset,
+        ));
+    }
     r.take(3, "RDLT reserved")?;
     let lw = scene.lang_width();
     let mut heads = Vec::with_capacity(count);
@@ -245,4 +255,116 @@ pub fn decode(
         });
     }
     Ok(DeltaResidual { groups })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene of 5 static and 2 dynamic Gaussians at SH degree 0, no language.
+    fn scene() -> SceneHeader {
+        let mut s = SceneHeader::still(5, 0);
+        s.n_dynamic = 2;
+        s
+    }
+
+    /// Position (exact) and opacity (quantised) deltas for every Gaussian; one opacity channel
+    /// of the static set wide (a delta span above 2^16).
+    fn residual() -> DeltaResidual {
+        DeltaResidual {
+            groups: vec![
+                DeltaGroup {
+                    group: AttrGroup::Position,
+                    mode: DeltaMode::Exact,
+                    statics: (0..15).map(|i| i - 7).collect(),
+                    dynamics: vec![1, 2, 3, 4, 5, 6],
+                },
+                DeltaGroup {
+                    group: AttrGroup::Opacity,
+                    mode: DeltaMode::Quantised {
+                        step: 0.5,
+                        bound: 0.25,
+                    },
+                    statics: vec![0, 1 << 20, -3, 4, 5],
+                    dynamics: vec![-1, 1],
+                },
+            ],
+        }
+    }
+
+    /// The error of decoding `p` (at offset 1000) as a `Payload` of `RDLT`: its offset.
+    fn payload_error(p: &[u8]) -> u64 {
+        let e = decode(p, 1000, &scene(), &Limits::default()).unwrap_err();
+        assert_eq!(e.name(), "Payload", "{e}");
+        assert!(e.to_string().contains("RDLT"), "{e}");
+        e.offset().unwrap()
+    }
+
+    #[test]
+    fn every_group_header_field_is_checked_where_it_stands() {
+        let d = residual();
+        let p = encode(&d, &scene(), 3).unwrap();
+        assert_eq!(decode(&p, 1000, &scene(), &Limits::default()).unwrap(), d);
+        let edit = |f: &dyn Fn(&mut Vec<u8>)| {
+            let mut q = p.clone();
+            f(&mut q);
+            q
+        };
+        // G above 8 (each group at most once): refused before any group header is read.
+        assert_eq!(payload_error(&edit(&|q| q[0] = 9)), 1000);
+        // Group id: unknown, absent from the scene (no language), given twice.
+        assert_eq!(payload_error(&edit(&|q| q[4] = 8)), 1004);
+        assert_eq!(payload_error(&edit(&|q| q[4] = 7)), 1004);
+        assert_eq!(payload_error(&edit(&|q| q[16] = 0)), 1016);
+        // Mode: 2 is unknown; mode 1 needs a finite step > 0 and a finite bound >= 0.
+        assert_eq!(payload_error(&edit(&|q| q[17] = 2)), 1017);
+        for (at, v) in [
+            (20, 0.0f32),
+            (20, -1.0),
+            (20, f32::NAN),
+            (24, -0.5),
+            (24, f32::INFINITY),
+        ] {
+            let q = edit(&|q| q[at..at + 4].copy_from_slice(&v.to_le_bytes()));
+            assert_eq!(payload_error(&q), 1020, "byte {at} = {v}");
+        }
+        // Mode 0 ignores step and bound.
+        let q = edit(&|q| q[8..16].copy_from_slice(&[0xff; 8]));
+        assert_eq!(decode(&q, 1000, &scene(), &Limits::default()).unwrap(), d);
+        // Channel codec and bits: the first channel (position x of the static set).
+        let ch = 4 + 12 * 2;
+        assert_eq!(payload_error(&edit(&|q| q[ch + 4] = 4)), 1000 + ch as u64);
+        assert_eq!(payload_error(&edit(&|q| q[ch + 5] = 0)), 1000 + ch as u64);
+        assert_eq!(payload_error(&edit(&|q| q[ch + 5] = 17)), 1000 + ch as u64);
+        // A channel longer than the payload: Truncated; above the budget: LimitExceeded.
+        let e = decode(&p[..p.len() - 1], 0, &scene(), &Limits::default()).unwrap_err();
+        assert_eq!(e.name(), "Truncated", "{e}");
+        let tight = Limits {
+            max_alloc: 16,
+            ..Limits::default()
+        };
+        let e = decode(&p, 0, &scene(), &tight).unwrap_err();
+        assert_eq!(e.name(), "LimitExceeded", "{e}");
+    }
+
+    #[test]
+    fn no_byte_change_panics_and_empty_sets_decode() {
+        let p = encode(&residual(), &scene(), 3).unwrap();
+        for i in 0..p.len() {
+            for v in [0, 1, 3, 0x7f, 0x80, 0xff, p[i] ^ 0x10] {
+                let mut q = p.clone();
+                q[i] = v;
+                let _ = decode(&q, 0, &scene(), &Limits::default());
+            }
+        }
+        // A scene without dynamic Gaussians: every dynamic channel holds no delta.
+        let mut still = scene();
+        still.n_dynamic = 0;
+        let mut d = residual();
+        for g in &mut d.groups {
+            g.dynamics.clear();
+        }
+        let p = encode(&d, &still, 3).unwrap();
+        assert_eq!(decode(&p, 0, &still, &Limits::default()).unwrap(), d);
+    }
 }

@@ -11,6 +11,7 @@ use crate::entropy::binary_bits;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::ntc::{NtcConfig, NtcField, NtcMlp, RowLayout};
+use crate::model::residual::{SET_DYNAMIC, SET_STATIC};
 
 /// Largest plane level count, log2 table size and feature count a reader accepts (bounds the
 /// work a file can ask for: at most 3 * 8 * 2^20 * 8 bits).
@@ -18,6 +19,9 @@ pub const MAX_LEVELS: usize = 8;
 pub const MAX_LOG2_TABLE: u8 = 20;
 pub const MAX_FEATURES: u8 = 8;
 pub const MAX_HIDDEN: usize = 1024;
+/// Grid resolutions (gate and plane levels) a reader accepts (§6.6.2).
+pub const MIN_RESOLUTION: u32 = 3;
+pub const MAX_RESOLUTION: u32 = 1 << 20;
 
 /// Where a segment's probability of a 1 bit comes from (§6.6.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -173,7 +177,19 @@ pub fn encode(f: &NtcField, scene: &SceneHeader, zstd_level: i32) -> Result<Vec<
 pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Result<NtcField> {
     let mut r = ByteReader::new(p, offset);
     let groups = r.u8("RNTC groups")?;
+    // The output width follows from the groups (of Gaussians or, in a Scaffold-GS scene, of
+    // anchors): every field is checked where it is read, before anything is sized from it.
+    let width = RowLayout::of(scene)
+        .row_width(groups)
+        .map_err(|e| Error::payload(ChunkType::RNTC, e, offset))?;
     let sets = r.u8("RNTC sets")?;
+    if sets == 0 || sets & !(SET_STATIC | SET_DYNAMIC) != 0 {
+        return Err(Error::payload(
+            ChunkType::RNTC,
+            format!("set mask {sets:#x} (bit 0 static, bit 1 dynamic, not 0)"),
+            offset + 1,
+        ));
+    }
     let at = r.offset();
     let features = r.u8("RNTC features")?;
     let log2_table = r.u8("RNTC log2 table")?;
@@ -208,14 +224,33 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
     r.u8("RNTC reserved")?;
     let mut bmin = [0f32; 3];
     let mut bmax = [0f32; 3];
+    let at = r.offset();
     for v in bmin.iter_mut().chain(bmax.iter_mut()) {
         *v = r.finite_f32("RNTC bounds")?;
     }
-    let gate_resolution = r.u32("RNTC gate resolution")?;
-    let mut resolutions = Vec::with_capacity(levels);
-    for _ in 0..levels {
-        resolutions.push(r.u32("RNTC resolution")?);
+    if let Some(a) = (0..3).find(|&a| bmax[a] <= bmin[a]) {
+        return Err(Error::payload(
+            ChunkType::RNTC,
+            format!("box axis {a}: bmax {} not above bmin {}", bmax[a], bmin[a]),
+            at + 12 + 4 * a as u64,
+        ));
     }
+    let mut resolution = |what| {
+        let at = r.offset();
+        let v = r.u32(what)?;
+        if !(MIN_RESOLUTION..=MAX_RESOLUTION).contains(&v) {
+            return Err(Error::payload(
+                ChunkType::RNTC,
+                format!("{what} {v} ({MIN_RESOLUTION}..={MAX_RESOLUTION})"),
+                at,
+            ));
+        }
+        Ok(v)
+    };
+    let gate_resolution = resolution("RNTC gate resolution")?;
+    let resolutions = (0..levels)
+        .map(|_| resolution("RNTC plane resolution"))
+        .collect::<Result<Vec<u32>>>()?;
     let at = r.offset();
     let hidden = r.u16("RNTC hidden width")? as usize;
     let outputs = r.u16("RNTC output width")? as usize;
@@ -223,6 +258,13 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         return Err(Error::payload(
             ChunkType::RNTC,
             format!("hidden width {hidden} (1..={MAX_HIDDEN})"),
+            at,
+        ));
+    }
+    if outputs != width {
+        return Err(Error::payload(
+            ChunkType::RNTC,
+            format!("output width {outputs}, the selected groups take {width}"),
             at,
         ));
     }
@@ -275,18 +317,6 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 .map_err(|e| Error::payload(ChunkType::RNTC, format!("segment {i}: {e}"), at))
         })
         .collect::<Result<_>>()?;
-    // The output width follows from the groups (of Gaussians or, in a Scaffold-GS scene, of
-    // anchors): check it before sizing the weights.
-    let width = RowLayout::of(scene)
-        .row_width(groups)
-        .map_err(|e| Error::payload(ChunkType::RNTC, e, offset))?;
-    if outputs != width {
-        return Err(Error::payload(
-            ChunkType::RNTC,
-            format!("output width {outputs}, the selected groups take {width}"),
-            at,
-        ));
-    }
     let inputs = config.input_width();
     let params = inputs * hidden + hidden + hidden * outputs + outputs;
     let at = r.offset();
@@ -321,4 +351,177 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         .validate_layout(RowLayout::of(scene))
         .map_err(|e| Error::payload(ChunkType::RNTC, e, offset))?;
     Ok(field)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene of 4 static and 2 dynamic Gaussians at SH degree 0, no language.
+    fn scene() -> SceneHeader {
+        let mut s = SceneHeader::still(4, 0);
+        s.n_dynamic = 2;
+        s
+    }
+
+    /// Two plane levels (R 6 dense, R 12 hashed; 2^5 entries of 2 features), gate R 5 of 2^6,
+    /// MLP 12 -> 4 -> 4 over position and opacity; bits and weights from a fixed seed.
+    fn field() -> NtcField {
+        let config = NtcConfig {
+            resolutions: vec![6, 12],
+            features: 2,
+            log2_table: 5,
+            gate_resolution: 5,
+            gate_log2_table: 6,
+        };
+        let mut rng = fastrand::Rng::with_seed(9);
+        let mut bits = |n: usize| (0..n).map(|_| rng.bool()).collect::<BitVec<u64, Lsb0>>();
+        let planes = (0..6).map(|_| bits(config.level_bits())).collect();
+        let gate = bits(config.gate_table());
+        let mut w = |n: usize| (0..n).map(|_| rng.f32() - 0.5).collect::<Vec<f32>>();
+        NtcField {
+            mlp: NtcMlp {
+                inputs: 12,
+                hidden: 4,
+                outputs: 4,
+                w1: w(48),
+                b1: w(4),
+                w2: w(16),
+                b2: w(4),
+            },
+            config,
+            bound_min: [-1.0, -2.0, -3.0],
+            bound_max: [1.0, 2.0, 3.0],
+            planes,
+            gate,
+            groups: 0b10_0001,
+            sets: SET_STATIC | SET_DYNAMIC,
+        }
+    }
+
+    /// Decode `p` at offset 1000: the error's name and offset.
+    fn fault(p: &[u8]) -> (&'static str, u64) {
+        let e = decode(p, 1000, &scene(), &Limits::default()).unwrap_err();
+        assert!(
+            e.name() != "Payload" || e.to_string().contains("RNTC"),
+            "{e}"
+        );
+        (e.name(), e.offset().unwrap())
+    }
+
+    #[test]
+    fn every_field_is_checked_where_it_stands() {
+        let f = field();
+        let p = encode(&f, &scene(), 3).unwrap();
+        assert_eq!(decode(&p, 1000, &scene(), &Limits::default()).unwrap(), f);
+        let edit = |at: usize, v: &[u8]| {
+            let mut q = p.clone();
+            q[at..at + v.len()].copy_from_slice(v);
+            q
+        };
+        let payload = |at: usize, v: &[u8]| {
+            assert_eq!(
+                fault(&edit(at, v)),
+                ("Payload", 1000 + at as u64),
+                "byte {at} = {v:?}"
+            );
+        };
+        // groups: none, a group of width 0 here (sh_rest at degree 0, language without it).
+        for g in [0u8, 0b1_0000, 0b100_0000] {
+            assert_eq!(fault(&edit(0, &[g])), ("Payload", 1000), "groups {g:#x}");
+        }
+        // sets: none, an undefined bit.
+        payload(1, &[0]);
+        payload(1, &[4]);
+        // F 1..=8, T2 and T3 1..=20, Lv 1..=8 (reported at F).
+        for (at, v) in [
+            (2, 0u8),
+            (2, 9),
+            (3, 0),
+            (3, 21),
+            (4, 0),
+            (4, 21),
+            (5, 0),
+            (5, 9),
+        ] {
+            assert_eq!(fault(&edit(at, &[v])), ("Payload", 1002), "byte {at} = {v}");
+        }
+        payload(6, &[2]);
+        // The box: finite, bmax > bmin per axis.
+        assert_eq!(
+            fault(&edit(8, &f32::NAN.to_le_bytes())),
+            ("NonFinite", 1008)
+        );
+        assert_eq!(
+            fault(&edit(28, &f32::INFINITY.to_le_bytes())),
+            ("NonFinite", 1028)
+        );
+        payload(24, &(-2.0f32).to_le_bytes());
+        payload(20, &(-1.5f32).to_le_bytes());
+        // Resolutions 3..=2^20: the gate's, then each plane level's.
+        payload(32, &2u32.to_le_bytes());
+        payload(36, &0u32.to_le_bytes());
+        payload(40, &((1u32 << 20) + 1).to_le_bytes());
+        // H 1..=1024; O the selected groups' width (4), reported at H.
+        payload(44, &0u16.to_le_bytes());
+        payload(44, &1025u16.to_le_bytes());
+        assert_eq!(fault(&edit(46, &5u16.to_le_bytes())), ("Payload", 1044));
+        // Segment 0 (2^5 x 2 bits): more ones than bits; a length not a multiple of 4, or 0
+        // for a segment that is not constant.
+        payload(48, &65u32.to_le_bytes());
+        for bytes in [6u32, 0] {
+            assert_eq!(fault(&edit(52, &bytes.to_le_bytes())), ("Payload", 1048));
+        }
+        // The weights: cut short (Truncated), another size (Decompress), not finite (Payload).
+        let coded: usize = (0..7)
+            .map(|k| u32::from_le_bytes(p[52 + 8 * k..56 + 8 * k].try_into().unwrap()) as usize)
+            .sum();
+        let wlen_at = 48 + 7 * 8 + coded;
+        assert_eq!(fault(&p[..p.len() - 1]).0, "Truncated");
+        let with_weights = |raw: &[u8]| {
+            let z = crate::bytes::zstd_compress(raw, 3).unwrap();
+            let mut q = p[..wlen_at].to_vec();
+            q.put_u32(z.len() as u32);
+            q.extend_from_slice(&z);
+            q
+        };
+        let mut raw: Vec<u8> = f.mlp.params().flat_map(|v| v.to_le_bytes()).collect();
+        assert_eq!(with_weights(&raw), p);
+        assert_eq!(fault(&with_weights(&raw[4..])).0, "Decompress");
+        raw[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert_eq!(fault(&with_weights(&raw)), ("Payload", 1000));
+        // The grid bits and the weights are drawn from the budget first.
+        let tight = Limits {
+            max_alloc: 32,
+            ..Limits::default()
+        };
+        let e = decode(&p, 0, &scene(), &tight).unwrap_err();
+        assert_eq!(e.name(), "LimitExceeded", "{e}");
+    }
+
+    #[test]
+    fn no_byte_change_panics_in_decoding_or_evaluating() {
+        let p = encode(&field(), &scene(), 3).unwrap();
+        let at = [
+            [0.1, 0.2, 0.3],
+            [-1.0, -2.0, -3.0],
+            [1.0, 2.0, 3.0],
+            [0.9, -1.9, 2.9],
+        ];
+        let mut decoded = 0;
+        for i in 0..p.len() {
+            for v in [0, 1, 3, 0x7f, 0x80, 0xff, p[i] ^ 0x10] {
+                let mut q = p.clone();
+                q[i] = v;
+                if let Ok(f) = decode(&q, 0, &scene(), &Limits::default()) {
+                    decoded += 1;
+                    assert_eq!(f.residuals_at(&at).len(), 4 * at.len());
+                    for x in at {
+                        assert_eq!(f.residual_at(x).len(), 4);
+                    }
+                }
+            }
+        }
+        assert!(decoded > 0);
+    }
 }

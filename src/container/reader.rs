@@ -10,7 +10,7 @@ use crate::container::chunk::{
 };
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry, TAIL_LEN};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
-use crate::container::rules::{self, Section, SectionRules};
+use crate::container::rules::{self, GopKind, Section, SectionRules};
 use crate::error::{io_err, Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 
@@ -222,8 +222,9 @@ impl<R: Read + Seek> FileReader<R> {
         })
     }
 
-    /// The known payload chunks of GOP `g` (its `GOPH` is checked and not returned).
-    /// Reads only chunk headers; payloads are read with [`FileReader::payload`].
+    /// The known payload chunks of GOP `g` (its `GOPH` is checked and not returned), checked
+    /// against §3.3's GOP rules (types, counts, order). Reads only chunk headers; payloads are
+    /// read with [`FileReader::payload`].
     pub fn gop_chunks(&mut self, g: u32) -> Result<Vec<ChunkInfo>> {
         let e = self.gop_entry(g)?;
         let end = e.offset + e.length;
@@ -238,7 +239,7 @@ impl<R: Read + Seek> FileReader<R> {
         gh.validate(&self.scene, g, goph.payload_offset())?;
         let mut out = Vec::new();
         let mut at = goph.end();
-        let mut rules = SectionRules::new(Section::Gop(g));
+        let mut rules = SectionRules::new(Section::Gop(g, GopKind::of(&self.scene, &gh)));
         while at < end {
             let c = self.header_at(at, end)?;
             if rules.admit(&c, &self.limits)? {

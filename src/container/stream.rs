@@ -10,7 +10,7 @@ use crate::container::chunk::{
 };
 use crate::container::gop::{GopHeader, GopIndex, IndexEntry};
 use crate::container::header::{decode_signature, SceneHeader, SIGNATURE_LEN};
-use crate::container::rules::{self, Section, SectionRules};
+use crate::container::rules::{self, GopKind, Section, SectionRules};
 use crate::error::{io_err, Error, FormatErrorKind, Result};
 use crate::limits::Limits;
 
@@ -192,7 +192,8 @@ impl<R: Read> StreamReader<R> {
                         length: 0,
                     });
                     self.state = State::InGop(c.gop);
-                    self.section = SectionRules::new(Section::Gop(c.gop));
+                    let kind = GopKind::of(&self.scene, &gh);
+                    self.section = SectionRules::new(Section::Gop(c.gop, kind));
                     return Ok(Some(StreamEvent::GopStart(c.gop, gh)));
                 }
                 ChunkType::GIDX => {

@@ -180,7 +180,51 @@ fn path_vectors_still_take_their_paths() {
             checked += 1;
         }
     }
-    assert_eq!(checked, 10);
+    assert_eq!(checked, 12);
+}
+
+/// The `LIFE` vector's listed frames (since 1.18, §6.14): exactly the Gaussians its entries
+/// hide at each listed time have colour and language opacity `-1e4`; every other dynamic
+/// Gaussian keeps an opacity the decoders give (the frames equal the decoder's bit for bit,
+/// checked above).
+#[test]
+fn life_vector_hides_exactly_the_gaussians_outside_their_frames() {
+    let (bytes, want) = vector_and_values(vectors::paths::LIFE_VECTOR, "frames");
+    let scene = dlgs::FileReader::open(std::io::Cursor::new(&bytes))
+        .unwrap()
+        .scene()
+        .clone();
+    let n = scene.n_dynamic as usize;
+    let per_time = n * 69;
+    let mut hidden_seen = 0;
+    for (k, &t) in vectors::FRAME_TIMES.iter().enumerate() {
+        // §4.3, §6.4: the frame shown at t, its GOP, the GOP-local frame.
+        let f = ((t * scene.fps()) + 1e-6).floor() as u32;
+        let f = f.min(scene.frame_count - 1);
+        let g = (f / scene.gop_length).min(scene.gop_count - 1);
+        let local = f - g * scene.gop_length;
+        let frame = &want[k * per_time..(k + 1) * per_time];
+        let (opacity, lang_opacity) = (&frame[10 * n..11 * n], &frame[11 * n..12 * n]);
+        for i in 0..n {
+            let hidden = vectors::paths::LIVES[g as usize]
+                .iter()
+                .any(|&(j, first, last)| {
+                    j as usize == i && !(first as u32 <= local && local <= last as u32)
+                });
+            let at = (opacity[i].to_bits(), lang_opacity[i].to_bits());
+            if hidden {
+                hidden_seen += 1;
+                assert_eq!(at, (0xC61C_4000, 0xC61C_4000), "t {t} Gaussian {i}");
+            } else {
+                assert!(
+                    opacity[i] > -1e3 && lang_opacity[i] > -1e3,
+                    "t {t} Gaussian {i}"
+                );
+            }
+        }
+    }
+    // t 0: 3 and 12; 0.5: 3, 7, 12; 1.2345: 7, 12; 2.0: 20; 3.95: 3.
+    assert_eq!(hidden_seen, 9);
 }
 
 /// The Scaffold-GS vectors: the committed files are what the generator builds; the valid one
@@ -192,6 +236,7 @@ fn scaffold_vectors_decode_to_their_frames_and_errors() {
     let listed = table("expected-scaffold.txt");
     let built = vectors::scaffold::all();
     assert_eq!(listed.len(), built.len());
+    let mut claims = 0;
     for (row, v) in listed.iter().zip(&built) {
         assert_eq!(row[0], v.name);
         let dir = if v.error.is_some() {
@@ -214,17 +259,34 @@ fn scaffold_vectors_decode_to_their_frames_and_errors() {
                     "{}",
                     v.name
                 );
+                // The in-order decoder gives the same frames (bit for bit).
+                assert_eq!(
+                    vectors::scaffold::stream_frames(v.name, &bytes).unwrap(),
+                    want,
+                    "{} (stream)",
+                    v.name
+                );
                 assert!(want[0] > 0.0, "frames with children");
+                if let Some(r) = vectors::scaffold::claims(v.name, &bytes) {
+                    r.unwrap();
+                    claims += 1;
+                }
             }
             Some(e) => {
-                let got = ScaffoldDecoder::new(std::io::Cursor::new(bytes), Limits::default())
+                let got = ScaffoldDecoder::new(std::io::Cursor::new(&bytes), Limits::default())
                     .and_then(|mut d| {
                         (0..d.scene().gop_count).try_for_each(|g| d.gop(g).map(|_| ()))
                     })
                     .expect_err(v.name);
                 assert_eq!(got.name(), e, "{}: {got}", v.name);
                 assert_eq!(row[1], e);
+                let got = vectors::scaffold::stream_frames(v.name, &bytes).expect_err(v.name);
+                assert_eq!(got.name(), e, "{} (stream): {got}", v.name);
             }
         }
     }
+    assert_eq!(
+        claims, 3,
+        "the AHAC scope 1, dense AHAC and refresh vectors"
+    );
 }

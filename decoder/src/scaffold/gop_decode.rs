@@ -21,7 +21,9 @@ pub(super) struct GopState {
     pub mlps: ScaffoldMlps,
 }
 
-/// A GOP's chunk headers and a way to read a chunk's payload.
+/// A GOP's chunk headers and a way to read a chunk's payload. The headers come from a
+/// container reader, which has checked §3.3's GOP rules (each type at most once, in order, and
+/// only the chunks this GOP can use), so a type found is the GOP's one chunk of that type.
 pub(super) struct GopChunks<'a> {
     pub chunks: &'a [ChunkInfo],
     /// Offset of the GOP (for errors about missing chunks).
@@ -74,16 +76,8 @@ pub(super) fn decode_state(
         let mlps = amlp::decode(&p, o, scene, limits).map_err(|e| e.in_chunk(ChunkType::AMLP))?;
         return Ok(GopState { canonical, mlps });
     };
-    // A residual GOP (§6.12): an RNTC over anchor groups, no canonical chunk.
-    if let Some(c) = gop
-        .find(ChunkType::ANCR)
-        .or_else(|| gop.find(ChunkType::AHAC))
-    {
-        return Err(Error::format(
-            FormatErrorKind::Order("a residual Scaffold-GS GOP holds RNTC, not ANCR or AHAC"),
-            c.offset,
-        ));
-    }
+    // A residual GOP (§6.12): an RNTC over anchor groups (the container reader has refused
+    // ANCR and AHAC here, §3.3).
     let (p, o) = gop.read(ChunkType::RNTC)?;
     let canonical = rntc::decode(&p, o, scene, limits)
         .and_then(|field| {

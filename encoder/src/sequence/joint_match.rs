@@ -363,6 +363,32 @@ fn match_from(a: &Gaussians, predicted: &[[f32; 3]], b: &Gaussians, start: Start
             matched += 1;
         }
     }
+    // Where the displacement field is not smooth (the seam between two parts that move apart),
+    // the prediction misses: a wider reach around the Gaussian's own position in `a` moved by
+    // the prediction, with attributes held to the gate itself.
+    if start != Start::Plain {
+        let left_a: Vec<u32> = (0..na as u32).filter(|&i| !taken[i as usize]).collect();
+        let left_pos: Vec<[f32; 3]> = left_a.iter().map(|&i| pred[i as usize]).collect();
+        let left_tree = KdTree::new(&left_pos);
+        let wide = (10.0 * r).max(4.0 * floor);
+        let mut pairs: Vec<(f32, u32, u32)> = Vec::new();
+        for j in (0..nb).filter(|&j| prev_of[j].is_none()) {
+            for (k, d) in left_tree.nearest(&b.positions[j], 8) {
+                let i = left_a[k as usize];
+                if d <= wide * wide && sig_d2(&sig_a[i as usize], &sig_b[j], &sigma) <= GATE {
+                    pairs.push((d, j as u32, i));
+                }
+            }
+        }
+        pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+        for (_, j, i) in pairs {
+            if prev_of[j as usize].is_none() && !taken[i as usize] {
+                prev_of[j as usize] = Some(i);
+                taken[i as usize] = true;
+                matched += 1;
+            }
+        }
+    }
     let mut dists: Vec<f32> = prev_of
         .iter()
         .enumerate()

@@ -120,18 +120,19 @@ language levels, the decoded L2-normalised 16-dim embedding (f16 weights widened
     }
     std::fs::write(root.join("expected-scaffold.txt"), scaffold).unwrap();
     readme.push_str(&format!(
-        "\n`valid/{name}.frames.f32` and `valid/{ahac}.frames.f32` hold what a decoder must produce (format-spec/dlgs.md §6.12) at t = {times:?} s \
+        "\n`valid/NAME.frames.f32`, for each valid Scaffold-GS vector NAME, holds what a decoder must produce (format-spec/dlgs.md §6.12) at t = {times:?} s \
 for the camera centre {cam:?}, language decoded: per time, the number of neural Gaussians (as an f32), then for \
 each, in anchor then offset order, position (3), scale (3), unit quaternion w x y z (4), RGB (3), colour opacity (1), \
 language opacity (1), language (9); f32 little-endian. A decoder conforms if the counts are equal and every value \
-is within 2e-4 (absolute); the reference decoder reproduces every value bit for bit on every platform. \
-`valid/{res}.frames.f32` (since 1.17) is the same at t = {rtimes:?} s, all in its residual GOP 1.\n",
-        name = dlgs_tests::vectors::scaffold::VALID,
-        ahac = dlgs_tests::vectors::scaffold::AHAC_VALID,
+is within 2e-4 (absolute); the reference decoder reproduces every value bit for bit on every platform, through its \
+random-access and its in-order decoder. `valid/{res}.frames.f32` (since 1.17) is the same at t = {rtimes:?} s, all in \
+its residual GOP 1; `valid/{refresh}.frames.f32` at t = {ftimes:?} s, in its refresh GOP 2 and in GOP 3.\n",
         times = dlgs_tests::vectors::scaffold::TIMES,
         cam = dlgs_tests::vectors::scaffold::CAMERA,
         res = dlgs_tests::vectors::scaffold::RESIDUAL,
         rtimes = dlgs_tests::vectors::scaffold::RESIDUAL_TIMES,
+        refresh = dlgs_tests::vectors::scaffold::REFRESH,
+        ftimes = dlgs_tests::vectors::scaffold::REFRESH_TIMES,
     ));
     std::fs::write(root.join("README.md"), readme).unwrap();
     println!("wrote {}", root.display());

@@ -1,5 +1,6 @@
-//! Invalid vectors for the index, the tail and a zstd `CRAW` body (format-spec §5.2, §5.3,
-//! §6.1): each is the valid `tiny-still` with exactly one fault, every other CRC kept valid.
+//! Invalid vectors for the index, the tail, a zstd `CRAW` body and a GOP's chunk rules
+//! (format-spec §3.3, §5.2, §5.3, §6.1): each is the valid `tiny-still` with exactly one
+//! fault, every other CRC kept valid.
 
 use dlgs::chunks::craw::{self, RawCodec};
 use dlgs::container::chunk::encode_header;
@@ -76,6 +77,19 @@ pub fn all(base: &[u8], tiny: &Canonical, tiny_scene: &SceneHeader) -> Vec<Vecto
     let mut refresh = base[..12].to_vec();
     refresh.extend(chunk(ChunkType::HEAD, FLAG_MUST_UNDERSTAND, SCENE, &head));
     refresh.extend_from_slice(&base[12 + 24 + 64 + 4..]);
+    // tiny-still's GOP with more chunks after its CRAW (§3.3): each may appear once, and
+    // LIFE only with dynamic Gaussians.
+    let craw0 = craw::encode(tiny, RawCodec::None, 19).unwrap();
+    let gop_with = |extra: (ChunkType, &[u8])| {
+        let mut w = Writer::new(Vec::new(), tiny_scene.clone()).unwrap();
+        w.begin_gop().unwrap();
+        w.gop_chunk(ChunkType::CRAW, FLAG_MUST_UNDERSTAND, &craw0)
+            .unwrap();
+        w.gop_chunk(extra.0, FLAG_MUST_UNDERSTAND, extra.1).unwrap();
+        w.finish().unwrap()
+    };
+    let mut no_entries = 0u32.to_le_bytes().to_vec();
+    no_entries.extend(dlgs::bytes::zstd_compress(&[], 19).unwrap());
     let mut bad_gop = base.to_vec();
     bad_gop[n - TAIL_LEN..n - TAIL_LEN + 24].copy_from_slice(&encode_header(
         ChunkType::TAIL,
@@ -107,6 +121,18 @@ pub fn all(base: &[u8], tiny: &Canonical, tiny_scene: &SceneHeader) -> Vec<Vecto
             bytes: refresh,
             error: Some("InvalidField"),
             about: "tiny-still's HEAD with refresh_interval 3 (offset 40, since 1.17) in an intra scene (only sequential scenes refresh); payload CRC valid",
+        },
+        Vector {
+            name: "x-craw-twice",
+            bytes: gop_with((ChunkType::CRAW, &craw0)),
+            error: Some("Order"),
+            about: "tiny-still's GOP with its CRAW written twice (since 1.18 a chunk type a GOP holds once, given twice, is Order at the second, §3.3)",
+        },
+        Vector {
+            name: "x-life-no-dynamic",
+            bytes: gop_with((ChunkType::LIFE, &no_entries)),
+            error: Some("Order"),
+            about: "tiny-still's GOP with a LIFE chunk (0 entries, a valid payload) after its CRAW in a scene without dynamic Gaussians (n_dynamic 0: Order, §3.3, §6.14)",
         },
         Vector {
             name: "x-tail-payload-crc",

@@ -4,7 +4,7 @@
 
 use dlgs::chunks::craw::{self, RawCodec};
 use dlgs::container::chunk::encode_header;
-use dlgs::container::{ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
+use dlgs::container::{ChunkInfo, ChunkType, SceneHeader, Writer, FLAG_MUST_UNDERSTAND};
 use dlgs::Canonical;
 
 use crate::{load, multi_gop_file, with_synthetic_language};
@@ -114,7 +114,7 @@ pub fn all() -> Vec<Vector> {
         name: "lod3-csog-compact",
         bytes: csog(&lod3, vec![0.1], true, Some(COARSE_ROTATIONS), true),
         error: None,
-        about: "the lod3 scene as CSOG layout 4 (since 1.14): lod3-csog-coarse-rot in compact records (varint counts and lengths, binary16 ranges, no word counts); what `dlgs encode` writes by default",
+        about: "the lod3 scene as CSOG layout 4 (since 1.14): lod3-csog-coarse-rot in compact records (varint counts and lengths, binary16 ranges, no word counts); what `dlgs encode --max-compression` writes (the default since 1.18 leaves codec 5's mixed modes out)",
     });
     v.push(Vector {
         name: DYNAMIC_VECTOR,
@@ -147,6 +147,22 @@ pub fn all() -> Vec<Vector> {
         about: "4 sequential GOPs of 10 frames (keys every 5) of 512 lod3 Gaussians at SH degree 0 with refresh_interval 2 (since 1.17): GOP 0 CRAW, GOP 1 a generated RNTC field, GOP 2 a refresh GOP (CRAW of the state GOP 1's field applied twice gives; no reference), GOP 3 an RNTC field against GOP 2; exact TFEA",
     });
     v.extend(paths::all(&lod3));
+    let life = &v
+        .iter()
+        .find(|v| v.name == paths::LIFE_VECTOR)
+        .unwrap()
+        .bytes;
+    let life_index = rewrite(life, |g, c, p| match (g, c.ty) {
+        (0, ChunkType::LIFE) => {
+            // One entry whose index (gap 32 from 0) is n_dynamic: past the dynamic set.
+            let mut raw = 32u32.to_le_bytes().to_vec();
+            raw.extend([0, 0, 0, 0]);
+            let mut p = 1u32.to_le_bytes().to_vec();
+            p.extend(dlgs::bytes::zstd_compress(&raw, 19).unwrap());
+            vec![(c.ty, c.flags, p)]
+        }
+        _ => vec![(c.ty, c.flags, p)],
+    });
     let mut bad = |name, error, about, f: &dyn Fn(&mut Vec<u8>)| {
         let mut b = base.clone();
         f(&mut b);
@@ -231,8 +247,39 @@ pub fn all() -> Vec<Vector> {
         error: Some("UnknownCriticalChunk"),
         about: "a must-understand chunk type this version does not define",
     });
+    v.push(Vector {
+        name: "x-life-index",
+        bytes: life_index,
+        error: Some("Payload"),
+        about: "lod3-dynamic-life with GOP 0's LIFE holding one entry for dynamic Gaussian 32 (gap 32) of 32: an index >= n_dynamic (§6.14)",
+    });
     v.extend(errors::all(&base, &tiny_c, &tiny_scene));
     v
+}
+
+/// `bytes` written again through the library's reader and writer, each known chunk of GOP `g`
+/// replaced by what `f(g, chunk, payload)` gives (type, flags, payload), in that order; scene
+/// chunks kept. Every CRC and the index are valid: a reader meets only the edit.
+pub(crate) fn rewrite(
+    bytes: &[u8],
+    f: impl Fn(u32, &ChunkInfo, Vec<u8>) -> Vec<(ChunkType, u16, Vec<u8>)>,
+) -> Vec<u8> {
+    let mut r = dlgs::FileReader::open(std::io::Cursor::new(bytes)).unwrap();
+    let mut w = Writer::new(Vec::new(), r.scene().clone()).unwrap();
+    for c in r.scene_chunks().to_vec() {
+        w.scene_chunk(c.ty, c.flags, &r.payload(&c).unwrap())
+            .unwrap();
+    }
+    for g in 0..r.scene().gop_count {
+        w.begin_gop().unwrap();
+        for c in r.gop_chunks(g).unwrap() {
+            let p = r.payload(&c).unwrap();
+            for (ty, flags, p) in f(g, &c, p) {
+                w.gop_chunk(ty, flags, &p).unwrap();
+            }
+        }
+    }
+    w.finish().unwrap()
 }
 
 /// Like `still`, for headers that disagree with the payload (the writer does not check).
@@ -350,12 +397,13 @@ pub const DYNAMIC_VECTOR: &str = "lod3-dynamic";
 /// The same model with intra-only HEVC time features (`TFEA` codec 3); frames listed likewise.
 pub const INTRA_VECTOR: &str = "lod3-dynamic-intra";
 /// Vectors whose decoded frames at [`FRAME_TIMES`] are listed.
-pub const FRAME_VECTORS: [&str; 5] = [
+pub const FRAME_VECTORS: [&str; 6] = [
     DYNAMIC_VECTOR,
     INTRA_VECTOR,
     paths::LERP_VECTOR,
     paths::HEVC_VECTOR,
     paths::HEVC_REFERENCE_VECTOR,
+    paths::LIFE_VECTOR,
 ];
 /// Vectors holding libx265 output, which may differ between x265 builds: the conformance test
 /// checks their frames against the listed ones instead of their bytes against the generator's.
@@ -587,6 +635,9 @@ fn csog(
             octree_positions,
             rotation_coarsening,
             compact_records,
+            // Codec 5's mixed modes where they code smaller (the encoder's default until
+            // 2026-12-02): pinned, so the vectors keep exercising them whatever the default.
+            mixed_margin: Some(dlgs::chunks::csog::grid_codecs::MIXED_MARGIN),
             ..Default::default()
         },
         still: dlgs_encoder::StillTools {

@@ -1,7 +1,8 @@
 //! Valid vectors for decoding paths the encoder's own choices leave out of the other vectors:
 //! each `CSOG` grid codec and codec 5's residual modes forced on every channel (§6.5.3),
-//! `RDLT` codec 2 (§6.7), `RNTC` scope 1 (§6.6.3), deform model 1 (§6.4), `TFEA` codecs 1
-//! and 2 (§6.2). [`claims`] checks that each vector still takes its path.
+//! `RDLT` codec 2 (§6.7), `RNTC` scope 1 (§6.6.3) and a dense gate grid (§6.6.4), deform
+//! model 1 (§6.4), `TFEA` codecs 1 and 2 (§6.2), `LIFE` (§6.14, since 1.18). [`claims`]
+//! checks that each vector still takes its path.
 
 use dlgs::chunks::csog::grid_codecs::{self as grid_coder, GridCodec};
 use dlgs::chunks::csog::grid_codecs::{adaptive_encode, AdaptiveMode as Mode, Previous};
@@ -304,11 +305,72 @@ fn rntc_grid_scope(scene: &Gaussians) -> Vec<u8> {
     })
 }
 
+/// `RNTC` whose gate grid is dense (`R3^3 <= 2^T3`: R 6 in 2^8 entries, §6.6.4), so the gate
+/// is read at `sum k_d R^d` rather than the hash; plane levels dense (16^2 <= 2^10) and hashed
+/// (32^2).
+fn rntc_dense_gate(scene: &Gaussians) -> Vec<u8> {
+    use dlgs::model::ntc::NtcConfig;
+    residual_scene(scene, Default::default(), |enc, m| {
+        let config = NtcConfig {
+            resolutions: vec![16, 32],
+            features: 2,
+            log2_table: 10,
+            gate_resolution: 6,
+            gate_log2_table: 8,
+        };
+        let mut rng = fastrand::Rng::with_seed(79);
+        let field = dlgs_testkit::synth::synth_ntc(&m.canonical, &mut rng, 1.0, config);
+        enc.push(dlgs_encoder::GopCanonical::Ntc(&field), Some(&m.gops[1]))
+            .unwrap();
+    })
+}
+
+/// The dynamic Gaussians the `LIFE` vector shows for part of a GOP, per GOP: (index, first,
+/// last). GOP 0: 3 born at local frame 20, 7 gone after frame 10, 12 never shown; GOP 1: 3 gone
+/// after frame 30, 20 born at frame 5.
+pub const LIVES: [&[(u32, u16, u16)]; 2] = [
+    &[(3, 20, 59), (7, 0, 10), (12, u16::MAX, 0)],
+    &[(3, 0, 30), (20, 5, 59)],
+];
+
+/// lod3-dynamic-lerp's scene (32 of 128 lod3 Gaussians moving, 2 GOPs of 60 frames, language,
+/// exact features, f16 `MLPW`, deform model 1) with a `LIFE` chunk in each GOP ([`LIVES`]).
+fn dynamic_life(scene: &Gaussians) -> Vec<u8> {
+    use dlgs::model::{Life, Lifetimes};
+    use dlgs_testkit::synth::{synth_dynamic, write_model, SynthSpec};
+    let spec = SynthSpec {
+        dynamic_fraction: 0.25,
+        gops: 2,
+        language: true,
+        deform_model: DeformModel::PaperLerp,
+        ..Default::default()
+    };
+    let mut m = synth_dynamic(&first(scene, 128), &spec).unwrap();
+    for (gop, lives) in m.gops.iter_mut().zip(LIVES) {
+        let entries = lives
+            .iter()
+            .map(|&(index, first, last)| Life { index, first, last })
+            .collect();
+        gop.life = Some(Lifetimes { entries });
+    }
+    let cfg = dlgs_encoder::EncoderConfig {
+        dynamic: dlgs_encoder::DynamicSettings {
+            features: dlgs_encoder::FeatureCodec::Exact,
+            mlp_weights: WeightType::F16,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    write_model(&m, cfg, Vec::new()).unwrap()
+}
+
 /// Names of the vectors that list decoded frames (`valid/<name>.frames.f32`) besides
 /// `lod3-dynamic` and `lod3-dynamic-intra`.
 pub const LERP_VECTOR: &str = "lod3-dynamic-lerp";
 pub const HEVC_VECTOR: &str = "lod3-dynamic-hevc";
 pub const HEVC_REFERENCE_VECTOR: &str = "lod3-dynamic-hevc-ref";
+/// The `LIFE` vector (since 1.18): its frames show the hidden Gaussians' opacities at `-1e4`.
+pub const LIFE_VECTOR: &str = "lod3-dynamic-life";
 
 pub fn all(lod3: &Gaussians) -> Vec<Vector> {
     let part = first(lod3, 256);
@@ -337,6 +399,12 @@ pub fn all(lod3: &Gaussians) -> Vec<Vector> {
             about: "as lod3-rdlt-predictive's scene, GOP 1 a generated RNTC (small grids, every group) whose bits are coded with frequency scope 1 (one 1-bit frequency over all plane segments, §6.6.3)",
         },
         Vector {
+            name: "lod3-rntc-dense-gate",
+            bytes: rntc_dense_gate(lod3),
+            error: None,
+            about: "as lod3-rdlt-predictive's scene, GOP 1 a generated RNTC whose gate grid is dense (R 6, 6^3 = 216 <= 2^8 entries: read at sum k_d R^d, not the hash, §6.6.4); plane levels R 16 (dense in 2^10) and R 32 (hashed), 2 features",
+        },
+        Vector {
             name: LERP_VECTOR,
             bytes: small_dynamic(lod3, dlgs_encoder::FeatureCodec::Exact, DeformModel::PaperLerp, false).1,
             error: None,
@@ -353,6 +421,12 @@ pub fn all(lod3: &Gaussians) -> Vec<Vector> {
             bytes: tfea_reference(lod3),
             error: None,
             about: "as lod3-dynamic-hevc with TFEA codec 2 (the reference implementation's dequantisation, one f64 range; the HEVC stream of the features tiled over one range); decoded frames in lod3-dynamic-hevc-ref.frames.f32",
+        },
+        Vector {
+            name: LIFE_VECTOR,
+            bytes: dynamic_life(lod3),
+            error: None,
+            about: "lod3-dynamic-lerp's scene with a LIFE chunk in each GOP (since 1.18, §6.14): GOP 0 dynamic Gaussian 3 born at local frame 20, 7 gone after frame 10, 12 never shown (first 0xFFFF, last 0); GOP 1 3 gone after frame 30, 20 born at frame 5; decoded frames in lod3-dynamic-life.frames.f32, where the hidden Gaussians' colour and language opacities are -1e4",
         },
     ]
 }
@@ -431,6 +505,27 @@ pub fn claims(name: &str, bytes: &[u8]) -> Option<Result<(), String>> {
             }
         }
         "lod3-rntc-grid-scope" => first_byte(ChunkType::RNTC, 6, 1),
+        "lod3-rntc-dense-gate" => {
+            // §6.6.2: T3 at byte 4, R3 at bytes 32..36; dense when R3^3 <= 2^T3.
+            let ps = payloads(bytes, ChunkType::RNTC).1;
+            let dense = |p: &Vec<u8>| {
+                let r = u32::from_le_bytes(p[32..36].try_into().unwrap()) as u64;
+                r.pow(3) <= 1 << p[4]
+            };
+            if !ps.is_empty() && ps.iter().all(|(_, p)| dense(p)) {
+                Ok(())
+            } else {
+                Err(format!("{name}: an RNTC gate grid is hashed"))
+            }
+        }
+        LIFE_VECTOR => {
+            let n = payloads(bytes, ChunkType::LIFE).1.len();
+            if n == LIVES.len() {
+                Ok(())
+            } else {
+                Err(format!("{name}: {n} LIFE chunks"))
+            }
+        }
         LERP_VECTOR => {
             let r = FileReader::open(std::io::Cursor::new(bytes)).unwrap();
             match r.scene().deform_model {

@@ -12,7 +12,7 @@ use dlgs::model::scaffold::{
     ScaffoldMlps, TwoLayer, FEAT_DIM, N_OFFSETS, SCALING_DIM,
 };
 use dlgs::model::TimeFeatures;
-use dlgs_decoder::scaffold::{ScaffoldDecoder, ViewRequest};
+use dlgs_decoder::scaffold::{ScaffoldDecoder, ScaffoldStreamDecoder, ViewRequest};
 use dlgs_encoder::scaffold::{scaffold_scene, ResidualViewMlps, ScaffoldWriter};
 
 use super::Vector;
@@ -103,15 +103,21 @@ pub const AHAC_VALID: &str = "scaffold-ahac-tiny";
 /// points in a box around them, one-level grids (3D: R 5, 2^4 entries; planes: R 6, 2^5; 2
 /// features), `mlp_grid` 8 -> 4 -> 175, generated weights and integers, batches of 2.
 pub fn hac_anchors() -> dlgs::chunks::ahac::HacAnchors {
+    hac_anchors_with((5, 4), (6, 5), 53)
+}
+
+/// As [`hac_anchors`] with one-level grids of (resolution, log2 entries) `g3` (3D) and `g2`
+/// (planes), grid bits, weights and integers drawn from `seed`.
+fn hac_anchors_with(g3: (u32, u8), g2: (u32, u8), seed: u64) -> dlgs::chunks::ahac::HacAnchors {
     use dlgs::model::hac_context::{GridShape, HacContext, CONTEXT_OUT};
     let (c, _, d, _) = model();
-    let mut rng = fastrand::Rng::with_seed(53);
-    let shape = |r: u32, log2: u8| GridShape {
+    let mut rng = fastrand::Rng::with_seed(seed);
+    let shape = |(r, log2): (u32, u8)| GridShape {
         resolutions: vec![r],
         log2_table: log2,
         features: 2,
     };
-    let (grid3, grid2) = (shape(5, 4), shape(6, 5));
+    let (grid3, grid2) = (shape(g3), shape(g2));
     let levels = HacContext::level_bits(&grid3, &grid2)
         .into_iter()
         .map(|n| (0..n).map(|_| rng.bool()).collect())
@@ -156,12 +162,42 @@ pub fn hac_anchors() -> dlgs::chunks::ahac::HacAnchors {
 
 /// The tiny model with its anchors in `AHAC` instead of `ANCR`.
 pub fn ahac_bytes() -> Vec<u8> {
+    ahac_file(&hac_anchors())
+}
+
+/// The tiny model's one-GOP file with these anchors in `AHAC`.
+fn ahac_file(h: &dlgs::chunks::ahac::HacAnchors) -> Vec<u8> {
     let (_, m, d, f) = model();
     let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
     let mut w = ScaffoldWriter::new(Vec::new(), scene, 19).unwrap();
-    w.push_gop_hac(&hac_anchors(), &m, Some((&d, &TfeaBody::Exact(f))))
+    w.push_gop_hac(h, &m, Some((&d, &TfeaBody::Exact(f))))
         .unwrap();
     w.finish().unwrap()
+}
+
+/// The `AHAC` payload's `scope` byte (§6.13.1, offset 54).
+fn ahac_scope(h: &dlgs::chunks::ahac::HacAnchors) -> u8 {
+    let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
+    dlgs::chunks::ahac::encode(h, &scene, 19).unwrap().0[54]
+}
+
+/// `AHAC` whose grid bits code smaller with one frequency per grid group (scope 1, §6.13.4)
+/// than with each segment's own: the first seed from 0 for which that holds (the encoder codes
+/// both ways and keeps the smaller).
+pub const AHAC_SCOPE: &str = "scaffold-ahac-scope";
+fn ahac_scope_bytes() -> Vec<u8> {
+    let h = (0..1000)
+        .map(|seed| hac_anchors_with((5, 4), (6, 5), seed))
+        .find(|h| ahac_scope(h) == 1)
+        .expect("a seed where scope 1 wins");
+    ahac_file(&h)
+}
+
+/// `AHAC` whose grids are dense (§6.13.5 reads them as §6.6.4: `sum k_d R^d` when
+/// `R^D <= 2^T`): the 3D level R 4 in 2^6 entries (64), the planes R 5 in 2^5 (25 <= 32).
+pub const AHAC_DENSE: &str = "scaffold-ahac-dense";
+fn ahac_dense_bytes() -> Vec<u8> {
+    ahac_file(&hac_anchors_with((4, 6), (5, 5), 53))
 }
 
 /// Offset of batch header `k` (batches x attributes) in the `AHAC` payload: the headers end
@@ -251,42 +287,110 @@ pub fn residual_bytes() -> Vec<u8> {
     w.finish().unwrap()
 }
 
+/// The refresh vector (since 1.17's `refresh_interval`, §4.1): 4 sequential GOPs, every second
+/// one intra.
+pub const REFRESH: &str = "scaffold-tiny-refresh";
+/// Times of the refresh vector's listed frames: in its refresh GOP 2 and in GOP 3, whose
+/// reference is GOP 2.
+pub const REFRESH_TIMES: [f64; 3] = [4.35, 6.0, 7.95];
+
+/// 4 GOPs of 60 frames, sequential with `refresh_interval` 2: GOP 0 `scaffold-tiny`'s model;
+/// GOP 1 the residual vector's `RNTC` with the view MLPs inherited; GOP 2 a refresh GOP (no
+/// reference): `ANCR` of other anchors (features halved plus 0.1, offsets mirrored) and a full
+/// `AMLP` (colour output biases shifted); GOP 3 the same `RNTC` against GOP 2, its view MLPs
+/// inherited from GOP 2. A decoder that chained GOP 3 to GOP 1 would show other anchors and
+/// colours.
+pub fn refresh_bytes() -> Vec<u8> {
+    let (c, m, d, f) = model();
+    let mut scene = scaffold_scene(2, 1, true, 30, 60, 10, 240);
+    scene.residual_mode = dlgs::container::ResidualMode::Sequential;
+    scene.refresh_interval = 2;
+    let mut w = ScaffoldWriter::new(Vec::new(), scene, 19).unwrap();
+    let f = TfeaBody::Exact(f);
+    let field = residual_field(d.bound_min, d.bound_max);
+    let mut c2 = c.clone();
+    for set in [&mut c2.statics, &mut c2.dynamics] {
+        for v in &mut set.features {
+            *v = *v * 0.5 + 0.1;
+        }
+        for v in &mut set.offsets {
+            *v = -*v;
+        }
+    }
+    let mut m2 = m.clone();
+    for b in m2.color.second.bias.as_mut().unwrap() {
+        *b -= 0.3;
+    }
+    w.push_gop(&c, &m, Some((&d, &f))).unwrap();
+    w.push_residual_gop(&field, ResidualViewMlps::Inherit, Some((&d, &f)))
+        .unwrap();
+    w.push_gop(&c2, &m2, Some((&d, &f))).unwrap();
+    w.push_residual_gop(&field, ResidualViewMlps::Inherit, Some((&d, &f)))
+        .unwrap();
+    w.finish().unwrap()
+}
+
+/// The times whose frames vector `name` lists.
+pub fn times(name: &str) -> &'static [f64] {
+    match name {
+        RESIDUAL => &RESIDUAL_TIMES,
+        REFRESH => &REFRESH_TIMES,
+        _ => &TIMES,
+    }
+}
+
 /// The listed frames: per time, every child's position (3), scale (3), rotation (4), colour (3),
 /// colour opacity (1), language opacity (1) and language (9), children in anchor then offset
 /// order; preceded by the child count (as f32) so that a reader can check it first. `name`
-/// picks the times ([`TIMES`], or [`RESIDUAL_TIMES`] for [`RESIDUAL`]).
+/// picks the times ([`times`]).
 pub fn frames(name: &str, bytes: &[u8]) -> Vec<f32> {
     let mut dec =
         ScaffoldDecoder::new(std::io::Cursor::new(bytes), dlgs::Limits::default()).unwrap();
     let mut out = Vec::new();
-    let times = if name == RESIDUAL {
-        RESIDUAL_TIMES
-    } else {
-        TIMES
-    };
-    for t in times {
-        let f = dec
-            .frame_at(
-                t,
-                &ViewRequest {
-                    camera_center: CAMERA,
-                    language: true,
-                    visible: None,
-                },
-            )
-            .unwrap();
-        out.push(f.len() as f32);
-        for i in 0..f.len() {
-            out.extend_from_slice(&f.positions[i]);
-            out.extend_from_slice(&f.scales[i]);
-            out.extend_from_slice(&f.rotations[i]);
-            out.extend_from_slice(&f.colors[i]);
-            out.push(f.opacity[i]);
-            out.push(f.lang_opacity[i]);
-            out.extend_from_slice(&f.lang[9 * i..9 * i + 9]);
-        }
+    for &t in times(name) {
+        push_frame(&mut out, &dec.frame_at(t, &VIEW).unwrap());
     }
     out
+}
+
+/// The view of the listed frames.
+const VIEW: ViewRequest = ViewRequest {
+    camera_center: CAMERA,
+    language: true,
+    visible: None,
+};
+
+/// One listed frame: the child count (as f32), then each child's values.
+fn push_frame(out: &mut Vec<f32>, f: &dlgs_decoder::scaffold::NeuralGaussians) {
+    out.push(f.len() as f32);
+    for i in 0..f.len() {
+        out.extend_from_slice(&f.positions[i]);
+        out.extend_from_slice(&f.scales[i]);
+        out.extend_from_slice(&f.rotations[i]);
+        out.extend_from_slice(&f.colors[i]);
+        out.push(f.opacity[i]);
+        out.push(f.lang_opacity[i]);
+        out.extend_from_slice(&f.lang[9 * i..9 * i + 9]);
+    }
+}
+
+/// As [`frames`] through the in-order [`ScaffoldStreamDecoder`] (every GOP decoded as it
+/// arrives, the index and tail checked at the end), or the error it stops with.
+pub fn stream_frames(name: &str, bytes: &[u8]) -> dlgs::Result<Vec<f32>> {
+    let mut dec = ScaffoldStreamDecoder::new(bytes, dlgs::Limits::default())?;
+    let mut gops = Vec::new();
+    while let Some(g) = dec.next_gop()? {
+        gops.push(g);
+    }
+    let mut out = Vec::new();
+    for &t in times(name) {
+        let tp = dec.scene().locate(t)?;
+        push_frame(
+            &mut out,
+            &gops[tp.gop as usize].frame(tp.key, tp.delta, &VIEW),
+        );
+    }
+    Ok(out)
 }
 
 /// Replace the payload of the first chunk of type `ty` with `f(payload)`, keeping the CRCs
@@ -326,6 +430,87 @@ fn patch_head(bytes: &[u8], f: impl Fn(&mut [u8])) -> Vec<u8> {
     out
 }
 
+/// `scaffold-tiny` with its GOP's chunks in the order `ANCR`, `ADEF`, `TFEA`, `AMLP` (§3.3:
+/// `AMLP` comes before `ADEF`; `Order`). Every payload is `scaffold-tiny`'s.
+fn chunk_order_bytes() -> Vec<u8> {
+    use dlgs::chunks::{adef, amlp, ancr, tfea};
+    use dlgs::container::{ChunkType, Writer, FLAG_MUST_UNDERSTAND};
+    let (c, m, d, f) = model();
+    let scene = scaffold_scene(2, 1, true, 30, 60, 10, 60);
+    let mut w = Writer::new(Vec::new(), scene.clone()).unwrap();
+    w.begin_gop().unwrap();
+    for (ty, p) in [
+        (ChunkType::ANCR, ancr::encode(&c, &scene, 19).unwrap()),
+        (ChunkType::ADEF, adef::encode(&d, 19).unwrap()),
+        (
+            ChunkType::TFEA,
+            tfea::encode(&TfeaBody::Exact(f), 19).unwrap(),
+        ),
+        (ChunkType::AMLP, amlp::encode(&m, &scene, 19).unwrap()),
+    ] {
+        w.gop_chunk(ty, FLAG_MUST_UNDERSTAND, &p).unwrap();
+    }
+    w.finish().unwrap()
+}
+
+/// The path each path vector of [`all`] exists for, checked on its bytes: `Err` says what
+/// changed; `None` for the other vectors.
+pub fn claims(name: &str, bytes: &[u8]) -> Option<Result<(), String>> {
+    use dlgs::container::{ChunkType, FileReader, NO_REFERENCE};
+    let mut r = FileReader::open(std::io::Cursor::new(bytes)).unwrap();
+    let mut gops = Vec::new();
+    for g in 0..r.scene().gop_count {
+        let chunks = r.gop_chunks(g).unwrap();
+        let payloads: Vec<(ChunkType, Vec<u8>)> = chunks
+            .iter()
+            .map(|c| (c.ty, r.payload(c).unwrap()))
+            .collect();
+        gops.push((r.gop_entry(g).unwrap().header.reference_gop, payloads));
+    }
+    let ahac = || {
+        let (_, p) = gops[0]
+            .1
+            .iter()
+            .find(|(t, _)| *t == ChunkType::AHAC)
+            .unwrap();
+        p.clone()
+    };
+    let ok = |holds: bool, what: &str| {
+        if holds {
+            Ok(())
+        } else {
+            Err(format!("{name}: {what}"))
+        }
+    };
+    Some(match name {
+        AHAC_SCOPE => ok(ahac()[54] == 1, "AHAC scope is not 1"),
+        AHAC_DENSE => {
+            // §6.13.1: L3, T3 at 48, 49; L2, T2 at 51, 52; then L3 + L2 u32 resolutions.
+            let p = ahac();
+            let res = |k: usize| u32::from_le_bytes(p[56 + 4 * k..60 + 4 * k].try_into().unwrap());
+            let (l3, t3, l2, t2) = (p[48] as usize, p[49], p[51] as usize, p[52]);
+            let dense3 = (0..l3).all(|k| (res(k) as u64).pow(3) <= 1 << t3);
+            let dense2 = (l3..l3 + l2).all(|k| (res(k) as u64).pow(2) <= 1 << t2);
+            ok(
+                l3 > 0 && l2 > 0 && dense3 && dense2,
+                "an AHAC grid level is hashed",
+            )
+        }
+        REFRESH => {
+            let types = |g: usize| gops[g].1.iter().map(|(t, _)| *t).collect::<Vec<_>>();
+            let refs: Vec<u32> = gops.iter().map(|(r, _)| *r).collect();
+            ok(
+                refs == [NO_REFERENCE, 0, NO_REFERENCE, 2]
+                    && types(2)[..2] == [ChunkType::ANCR, ChunkType::AMLP]
+                    && types(3)[0] == ChunkType::RNTC
+                    && !types(3).contains(&ChunkType::AMLP),
+                "GOP 2 is not a refresh GOP with its own anchors and view MLPs, or GOP 3 not a residual of it",
+            )
+        }
+        _ => return None,
+    })
+}
+
 pub fn all() -> Vec<Vector> {
     let good = valid_bytes();
     let residual = residual_bytes();
@@ -336,6 +521,18 @@ pub fn all() -> Vec<Vector> {
             bytes: ahac.clone(),
             error: None,
             about: "scaffold-tiny with its anchors HAC-coded (AHAC, since 1.17): the 3 real points quantised, one-level binary grids, mlp_grid 8->4->175, generated integers in batches of 2 (one log-scaling alphabet of ~200); its frames in scaffold-ahac-tiny.frames.f32",
+        },
+        Vector {
+            name: AHAC_SCOPE,
+            bytes: ahac_scope_bytes(),
+            error: None,
+            about: "scaffold-ahac-tiny's grid shapes with grid bits, mlp_grid weights and integers from the first seed whose grid bits code smaller with one 1-bit frequency per grid group (scope 1, §6.13.4: the 3D level alone, the xy, xz, yz levels together) than with each level's own; its frames in scaffold-ahac-scope.frames.f32",
+        },
+        Vector {
+            name: AHAC_DENSE,
+            bytes: ahac_dense_bytes(),
+            error: None,
+            about: "scaffold-ahac-tiny with dense context grids (§6.13.5 as §6.6.4: entry sum k_d R^d, not the hash): the 3D level R 4 in 2^6 entries (4^3 = 64), the planes R 5 in 2^5 (25 <= 32); its frames in scaffold-ahac-dense.frames.f32",
         },
         Vector {
             name: "x-ahac-alphabet",
@@ -385,6 +582,18 @@ pub fn all() -> Vec<Vector> {
             bytes: residual.clone(),
             error: None,
             about: "Scaffold-GS residual GOPs (since 1.17): scaffold-tiny's model as GOP 0, then a sequential GOP 1 with an RNTC over the anchor groups feature, offsets and log_scaling (2 plane levels R 6, 12 of 2^5 entries x 2 features, gate R 5 of 2^6, MLP 12 -> 6 -> 86, random bits and weights) and a language-only AMLP (flags 3); its GOP-1 frames in scaffold-tiny-residual.frames.f32",
+        },
+        Vector {
+            name: REFRESH,
+            bytes: refresh_bytes(),
+            error: None,
+            about: "Scaffold-GS refresh GOPs (refresh_interval 2, since 1.17): 4 sequential GOPs; GOP 0 scaffold-tiny's model, GOP 1 scaffold-tiny-residual's RNTC with the view MLPs inherited, GOP 2 a refresh GOP (no reference: ANCR of other anchors, features halved plus 0.1 and offsets mirrored, and a full AMLP with the colour biases shifted), GOP 3 the same RNTC against GOP 2 with GOP 2's view MLPs inherited; its frames (in GOPs 2 and 3) in scaffold-tiny-refresh.frames.f32",
+        },
+        Vector {
+            name: "x-scaffold-chunk-order",
+            bytes: chunk_order_bytes(),
+            error: Some("Order"),
+            about: "scaffold-tiny's GOP with its chunks in the order ANCR, ADEF, TFEA, AMLP (AMLP comes before ADEF, §3.3, since 1.18 an error)",
         },
         Vector {
             name: "x-scaffold-residual-group",
