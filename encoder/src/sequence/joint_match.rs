@@ -177,6 +177,57 @@ enum Start {
     AttributeLed,
 }
 
+/// Both frames as the left-over pairing sees them.
+struct Sides<'a> {
+    /// Frame `a`'s Gaussians predicted into `b`'s time.
+    pred: &'a [[f32; 3]],
+    b: &'a [[f32; 3]],
+    sig_a: &'a [[f32; SIG]],
+    sig_b: &'a [[f32; SIG]],
+    sigma: &'a [f32; SIG],
+}
+
+impl Sides<'_> {
+    /// Pair the unmatched Gaussians of `b` with the untaken ones of `a` among each one's `k`
+    /// nearest predictions within `reach` and attributes within `sig_gate` (squared, in noise
+    /// units), nearest pairs first (ties by index). Returns the pairs made.
+    fn pair_leftovers(
+        &self,
+        prev_of: &mut [Option<u32>],
+        taken: &mut [bool],
+        k: usize,
+        reach: f32,
+        sig_gate: f32,
+    ) -> usize {
+        let left_a: Vec<u32> = (0..taken.len() as u32)
+            .filter(|&i| !taken[i as usize])
+            .collect();
+        let left_pos: Vec<[f32; 3]> = left_a.iter().map(|&i| self.pred[i as usize]).collect();
+        let tree = KdTree::new(&left_pos);
+        let mut pairs: Vec<(f32, u32, u32)> = Vec::new();
+        for j in (0..self.b.len()).filter(|&j| prev_of[j].is_none()) {
+            for (n, d) in tree.nearest(&self.b[j], k) {
+                let i = left_a[n as usize];
+                if d <= reach * reach
+                    && sig_d2(&self.sig_a[i as usize], &self.sig_b[j], self.sigma) <= sig_gate
+                {
+                    pairs.push((d, j as u32, i));
+                }
+            }
+        }
+        pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+        let mut made = 0;
+        for (_, j, i) in pairs {
+            if prev_of[j as usize].is_none() && !taken[i as usize] {
+                prev_of[j as usize] = Some(i);
+                taken[i as usize] = true;
+                made += 1;
+            }
+        }
+        made
+    }
+}
+
 /// `predicted` with each Gaussian's displacement replaced by the median of its voters'.
 fn smoothed(a: &Gaussians, predicted: &[[f32; 3]], voters: &[Vec<u32>]) -> Vec<[f32; 3]> {
     (0..a.len())
@@ -337,57 +388,19 @@ fn match_from(a: &Gaussians, predicted: &[[f32; 3]], b: &Gaussians, start: Start
     }
     // Left-overs: by position alone (attributes may change where motion does not), near the
     // prediction: within three radii or one spacing.
-    let left_a: Vec<u32> = (0..na as u32).filter(|&i| !taken[i as usize]).collect();
-    let left_pos: Vec<[f32; 3]> = left_a.iter().map(|&i| pred[i as usize]).collect();
-    let left_tree = KdTree::new(&left_pos);
-    let left_a = &left_a;
-    let left_tree = &left_tree;
-    let mut pairs: Vec<(f32, u32, u32)> = (0..nb)
-        .filter(|&j| prev_of[j].is_none())
-        .flat_map(|j| {
-            left_tree
-                .nearest(&b.positions[j], 4)
-                .into_iter()
-                .map(move |(k, d)| (d, j as u32, left_a[k as usize]))
-        })
-        .filter(|&(d, j, i)| {
-            d <= reach * reach
-                && sig_d2(&sig_a[i as usize], &sig_b[j as usize], &sigma) <= 4.0 * GATE
-        })
-        .collect();
-    pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
-    for (_, j, i) in pairs {
-        if prev_of[j as usize].is_none() && !taken[i as usize] {
-            prev_of[j as usize] = Some(i);
-            taken[i as usize] = true;
-            matched += 1;
-        }
-    }
+    let sides = Sides {
+        pred: &pred,
+        b: &b.positions,
+        sig_a: &sig_a,
+        sig_b: &sig_b,
+        sigma: &sigma,
+    };
+    matched += sides.pair_leftovers(&mut prev_of, &mut taken, 4, reach, 4.0 * GATE);
     // Where the displacement field is not smooth (the seam between two parts that move apart),
-    // the prediction misses: a wider reach around the Gaussian's own position in `a` moved by
-    // the prediction, with attributes held to the gate itself.
+    // the prediction misses: a wider reach, with attributes held to the gate itself.
     if start != Start::Plain {
-        let left_a: Vec<u32> = (0..na as u32).filter(|&i| !taken[i as usize]).collect();
-        let left_pos: Vec<[f32; 3]> = left_a.iter().map(|&i| pred[i as usize]).collect();
-        let left_tree = KdTree::new(&left_pos);
         let wide = (10.0 * r).max(4.0 * floor);
-        let mut pairs: Vec<(f32, u32, u32)> = Vec::new();
-        for j in (0..nb).filter(|&j| prev_of[j].is_none()) {
-            for (k, d) in left_tree.nearest(&b.positions[j], 8) {
-                let i = left_a[k as usize];
-                if d <= wide * wide && sig_d2(&sig_a[i as usize], &sig_b[j], &sigma) <= GATE {
-                    pairs.push((d, j as u32, i));
-                }
-            }
-        }
-        pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
-        for (_, j, i) in pairs {
-            if prev_of[j as usize].is_none() && !taken[i as usize] {
-                prev_of[j as usize] = Some(i);
-                taken[i as usize] = true;
-                matched += 1;
-            }
-        }
+        matched += sides.pair_leftovers(&mut prev_of, &mut taken, 8, wide, GATE);
     }
     let mut dists: Vec<f32> = prev_of
         .iter()

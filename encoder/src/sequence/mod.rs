@@ -28,7 +28,6 @@ use dlgs::{Error, Result};
 pub use fit::GopFit;
 pub use joint_match::{match_joint, spacing, JointMatch};
 pub use ntc_fit::{NtcFitReport, NtcFitSettings};
-pub use tracks::Tracks;
 
 /// How a sequence is cut and fitted.
 #[derive(Debug, Clone, PartialEq)]
