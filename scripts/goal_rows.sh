@@ -36,6 +36,15 @@
 # target/peers-mosaic: scripts/peers.sh, scripts/large_scene_rd.sh, MOSAIC=1 scripts/large_scene_rd.sh;
 # target/peers-large-shuffled: DLGS_SCENES=$PWD/target/big_shuf.ply bash scripts/peers.sh target/peers-large-shuffled;
 # and target/peers-wave: DLGS_SCENES=sequence/playcanvas_wave_200f/wave_0001.sog bash scripts/peers.sh target/peers-wave)
+# ONLY="pattern ..." : only the rows of scenes whose names (file names without extension) match one of
+# these shell patterns (ONLY="*donut* big": the donut and the 273k scene, not big_shuf); the peer folders of
+# the other rows are then not needed.
+# DECODE=1: three more columns, the decode times of the row's SOG and SPZ files with
+# @playcanvas/splat-transform 2.7.1's own readers (Node, one thread) and of the dlgs file with
+# `decode_timing` on 1 and 2 threads, each the median of RUNS (default 9) from bytes in memory,
+# timed in turn in the same minute as the row (scripts/peer_decode.sh's timers); and the SPZ
+# file's PSNR. Issue 66's one-run table: `DECODE=1 WIDE=0 bash scripts/goal_rows.sh`
+# (docs/benchmarks/decode.md "The fast default beside SOG and SPZ").
 # BYTES=1 [DLGS=path/to/dlgs]: only encode each row and print its bytes and the SHA-256 of the file
 # after its 12-byte signature (the minor version there changes with every format revision): the
 # check that a change leaves every goal row's file byte for byte the same (run it with the old and
@@ -57,8 +66,24 @@ export RUST_BACKTRACE=0
 metric() { $DLGS compare "$1" "$2" --orbit "${3:-8}" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print("%.2f %.4f" % (d["mean_psnr"], d["mean_ssim"]))'; }
 peer() { awk -F'\t' -v n="$2" -v f="$3" '$1==n && $2==f {print $3}' "$1/times.tsv"; }
 WIDE=${WIDE-32}
+RUNS=${RUNS:-9}
+MODULES=target/peer-node/node_modules
+if [ "${DECODE:-0}" = 1 ]; then
+  if [ ! -d "$MODULES/@playcanvas/splat-transform" ]; then
+    mkdir -p target/peer-node
+    npm install --silent --no-audit --no-fund --prefix target/peer-node @playcanvas/splat-transform@2.7.1
+  fi
+  cargo build --release -q -p dlgs-decoder --example decode_timing
+fi
+# peer_ms FILE: median ms of splat-transform's reader; dlgs_ms FILE THREADS: of decode_timing.
+peer_ms() { node scripts/peer_decode_timing.mjs "$MODULES" "$1" "$RUNS" | cut -f3; }
+dlgs_ms() { RAYON_NUM_THREADS=$2 ./target/release/examples/decode_timing "$1" "$RUNS" | sed -E 's/.*median ([0-9.]+) ms.*/\1/'; }
+wanted() { [ -z "${ONLY:-}" ] && return 0; local w; for w in $ONLY; do [[ "$1" == $w ]] && return 0; done; return 1; }
 if [ "${BYTES:-0}" = 1 ]; then
   echo "scene bytes sha256-after-signature"
+elif [ "${DECODE:-0}" = 1 ]; then
+  echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB: ours (SOG's, SPZ's) | encode s | decode ms: SOG 1 thread | SPZ 1 thread | ours 1 thread | ours 2 threads |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
 elif [ -n "$WIDE" ] && [ "$WIDE" != 0 ]; then
   echo "| scene | options | bytes | % of SOG | % of SPZ | PSNR dB (SOG's) | SSIM (SOG's) | encode s | PSNR dB on $WIDE views (SOG's) |"
   echo "|---|---|---|---|---|---|---|---|---|"
@@ -70,6 +95,7 @@ row() { # peers_dir scene_file options...
   local peers=$1 src=$2; shift 2
   local name; name=$(basename "${src%.*}")
   local f="$OUT/$name.dlgs" sog spz start end
+  wanted "$name" || return 0
   if [ "${BYTES:-0}" = 1 ]; then
     $DLGS encode "$src" -o "$f" "$@" > /dev/null
     printf '%s %s %s\n' "$name" "$(stat -c %s "$f")" "$(tail -c +13 "$f" | sha256sum | cut -c1-16)"
@@ -83,6 +109,14 @@ row() { # peers_dir scene_file options...
   start=$(date +%s.%N); $DLGS encode "$src" -o "$f" "$@" > /dev/null; end=$(date +%s.%N)
   read -r p s <<< "$(metric "$src" "$f")"
   local b; b=$(stat -c %s "$f")
+  if [ "${DECODE:-0}" = 1 ]; then
+    read -r zp _ <<< "$(metric "$src" "$peers/$name.spz.ply")"
+    printf '| %s | `%s` | %s | %.1f %% | %.1f %% | %s (%s, %s) | %.1f | %s | %s | %s | %s |\n' "$name" "$*" "$b" \
+      "$(echo "100 * $b / $sog" | bc -l)" "$(echo "100 * $b / $spz" | bc -l)" "$p" "$sp" "$zp" \
+      "$(echo "$end - $start" | bc)" "$(peer_ms "$peers/$name.sog")" "$(peer_ms "$peers/$name.spz")" \
+      "$(dlgs_ms "$f" 1)" "$(dlgs_ms "$f" 2)"
+    return
+  fi
   local wide=""
   if [ -n "$WIDE" ] && [ "$WIDE" != 0 ]; then
     read -r wp _ <<< "$(metric "$src" "$f" "$WIDE")"

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use dlgs::container::header::ResidualMode;
-use dlgs_encoder::sequence::{self, NtcFitSettings, SequenceReport, SequenceSettings};
+use dlgs_encoder::sequence::{self, Fallback, NtcFitSettings, SequenceReport, SequenceSettings};
 use dlgs_render::{metrics, render, RenderOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -32,8 +32,8 @@ pub struct SequenceArgs {
     pub key_interval: Option<u32>,
     /// Two consecutive frames whose matched Gaussians match confidently less often than this
     /// share (0-1), or that match less than half their Gaussians, have no consistent
-    /// correspondence: every track ends there and new ones begin (a cut, reported), or with
-    /// --no-cuts the sequence is refused.
+    /// correspondence: the --fallback takes over there (reported), or with --no-cuts the
+    /// sequence is refused.
     #[arg(
         help_heading = "Sequences (per-frame files)",
         long,
@@ -44,6 +44,18 @@ pub struct SequenceArgs {
     /// tracks there.
     #[arg(help_heading = "Sequences (per-frame files)", long)]
     pub no_cuts: bool,
+    /// Where two frames have no consistent correspondence: `resample` (the tracks go on carried
+    /// by the displacement field fitted between the frames until the next GOP, whose first frame
+    /// begins new tracks: one set of Gaussians per GOP) or `cut` (every track ends and the
+    /// frame's own Gaussians begin new ones: as many Gaussians as coding each frame on its own,
+    /// every frame exact). A sequence with cuts is coded with intra GOPs.
+    #[arg(
+        help_heading = "Sequences (per-frame files)",
+        long,
+        default_value = "resample",
+        value_parser = ["resample", "cut"]
+    )]
+    pub fallback: String,
     /// GOPs after the first carry explicit residuals (RDLT) instead of the default fitted
     /// binary voxel residual field (RNTC). `--residual-mode intra` sends every GOP's canonical
     /// Gaussians instead (random access without a residual chain, more bytes).
@@ -207,6 +219,11 @@ pub fn run_sequence(
         },
         min_confident: seq.min_confident,
         allow_cuts: !seq.no_cuts,
+        fallback: if seq.fallback == "cut" {
+            Fallback::Cut
+        } else {
+            Fallback::Resample
+        },
         residual_mode: mode,
         refresh_interval: refresh_interval(codec.refresh, mode)?,
         residual_field: (!seq.explicit_residuals).then(|| NtcFitSettings {
@@ -370,17 +387,35 @@ fn print_report(r: &SequenceReport, files: &[PathBuf], fit_s: f64, total_s: f64)
             r.pairs.iter().map(|p| p.deaths).sum::<usize>(),
         );
     }
+    let pairs_at = |ts: &[usize]| {
+        let mut s = ts
+            .iter()
+            .take(8)
+            .map(|&t| format!("{} -> {}", name(t - 1), name(t)))
+            .collect::<Vec<_>>()
+            .join(", ");
+        if ts.len() > 8 {
+            s.push_str(", ...");
+        }
+        s
+    };
+    if !r.resampled.is_empty() {
+        println!(
+            "no consistent correspondence at {} frame(s) ({}): the tracks went on carried by the \
+             fitted motion (fallback `resample`; those frames' own Gaussians are not shown: \
+             --check measures what that costs; --fallback cut codes them exactly, --no-cuts \
+             refuses)",
+            r.resampled.len(),
+            pairs_at(&r.resampled)
+        );
+    }
     if !r.cuts.is_empty() {
         println!(
             "no consistent correspondence at {} frame(s) ({}): every track ended there and new \
-             ones began (--no-cuts refuses instead)",
+             ones began; coded with {:?} GOPs (--no-cuts refuses instead)",
             r.cuts.len(),
-            r.cuts
-                .iter()
-                .take(8)
-                .map(|&t| format!("{} -> {}", name(t - 1), name(t)))
-                .collect::<Vec<_>>()
-                .join(", ")
+            pairs_at(&r.cuts),
+            r.residual_mode
         );
     }
     for (g, f) in r.gops.iter().enumerate() {

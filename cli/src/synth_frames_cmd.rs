@@ -29,6 +29,12 @@ pub struct SynthFramesArgs {
     /// Share of Gaussians that live for only part of the sequence (0-1).
     #[arg(long, default_value_t = 0.0)]
     pub births: f32,
+    /// Frames as independent per-frame reconstructions would give them: every Gaussian moved by
+    /// this many neighbour spacings at random (normal, per axis), its scale, opacity and colour
+    /// perturbed, a share of 0.1x this left out, drawn anew for each frame, so that no Gaussian
+    /// of one frame is exactly one of the next (0: the same Gaussians moved).
+    #[arg(long, default_value_t = 0.0)]
+    pub independent: f32,
     /// Keep every k-th Gaussian of the scene (1: all).
     #[arg(long, default_value_t = 1)]
     pub every: usize,
@@ -41,8 +47,16 @@ pub struct SynthFramesArgs {
 }
 
 pub fn run(a: &SynthFramesArgs) -> Result<()> {
-    if a.frames < 2 || !(a.speed >= 0.0) || !(0.0..=1.0).contains(&a.births) || a.every == 0 {
-        bail!("need --frames >= 2, --speed >= 0, --births in 0..=1 and --every >= 1");
+    if a.frames < 2
+        || !(a.speed >= 0.0)
+        || !(0.0..=1.0).contains(&a.births)
+        || !(0.0..=10.0).contains(&a.independent)
+        || a.every == 0
+    {
+        bail!(
+            "need --frames >= 2, --speed >= 0, --births in 0..=1, --independent in 0..=10 and \
+             --every >= 1"
+        );
     }
     let full = dlgs::interop::read_splat_file(&a.scene)
         .with_context(|| format!("reading {}", a.scene.display()))?
@@ -57,6 +71,7 @@ pub fn run(a: &SynthFramesArgs) -> Result<()> {
         speed: a.speed,
         period: a.period,
         births: a.births,
+        independent: a.independent,
         seed: a.seed,
     };
     let seq = hard_sequence(&scene, &spec);

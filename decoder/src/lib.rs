@@ -4,6 +4,7 @@
 #![deny(clippy::disallowed_methods)]
 
 mod build;
+mod clock;
 pub mod deform;
 pub mod hevc;
 mod hevc_headers;
@@ -229,23 +230,30 @@ impl<R: Read + Seek> Decoder<R> {
         // a second thread while this one decodes the state (residual application). Chunks that
         // cannot be read fail first; decode errors are reported state first, as a sequential
         // decode would. Every value depends only on its inputs, so the overlap changes no bit.
-        let (state, dynamic) = std::thread::scope(|s| {
-            let worker = s.spawn(|| {
-                let dynamic = payloads
-                    .as_ref()
-                    .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), p))
-                    .transpose()?;
-                if let Some((features, _, _)) = &dynamic {
-                    features.ensure_keys(keys)?;
-                }
-                Ok(dynamic)
-            });
+        let decode_dynamic = || {
+            let dynamic = payloads
+                .as_ref()
+                .map(|p| build::decode_dynamic(&scene, &limits, hevc.as_ref(), p))
+                .transpose()?;
+            if let Some((features, _, _)) = &dynamic {
+                features.ensure_keys(keys)?;
+            }
+            Ok(dynamic)
+        };
+        // wasm32-unknown-unknown cannot start threads (std::thread panics): in turn there.
+        let (state, dynamic) = if cfg!(target_arch = "wasm32") {
             let state = self.state(g);
-            let dynamic = worker
-                .join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-            (state, dynamic)
-        });
+            (state, decode_dynamic())
+        } else {
+            std::thread::scope(|s| {
+                let worker = s.spawn(decode_dynamic);
+                let state = self.state(g);
+                let dynamic = worker
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                (state, dynamic)
+            })
+        };
         let gop = Arc::new(build::assemble(&scene, g, state?, dynamic?));
         self.gops.insert(g, gop.clone());
         Ok(gop)

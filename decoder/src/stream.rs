@@ -5,7 +5,9 @@
 
 use std::io::Read;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use crate::clock::Instant;
 
 use dlgs::chunks::laed;
 use dlgs::container::gop::{GopHeader, NO_REFERENCE};

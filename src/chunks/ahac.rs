@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use crate::bytes::{zstd_compress, zstd_exact, ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
 use crate::entropy::binary_bits;
+use crate::entropy::binary_bits::BitWord;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::hac_cdf::{GaussModel, MAX_ALPHABET, MAX_SYMBOL_MAGNITUDE};
@@ -204,7 +205,7 @@ pub fn encode(
     out.put_f32s(&c.bound_max);
     out.put_f32s(&c.q_base);
     let (g3, g2) = (&c.grid3, &c.grid2);
-    let (segs, ones): (Vec<&BitSlice<u64, Lsb0>>, Vec<u64>) = c
+    let (segs, ones): (Vec<&BitSlice<BitWord, Lsb0>>, Vec<u64>) = c
         .levels
         .iter()
         .map(|l| (l.as_bitslice(), l.count_ones() as u64))
@@ -448,7 +449,7 @@ pub fn decode_full(
         let at = r.offset();
         streams.push((at, r.take(s, "AHAC segment words")?));
     }
-    let levels: Vec<BitVec<u64, Lsb0>> = streams
+    let levels: Vec<BitVec<BitWord, Lsb0>> = streams
         .par_iter()
         .enumerate()
         .map(|(i, &(at, b))| {

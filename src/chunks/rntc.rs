@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use crate::bytes::{ByteReader, PutLe};
 use crate::container::{ChunkType, SceneHeader};
 use crate::entropy::binary_bits;
+use crate::entropy::binary_bits::BitWord;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::model::ntc::{NtcConfig, NtcField, NtcMlp, RowLayout};
@@ -57,7 +58,7 @@ fn probabilities(ones: &[u64], lens: &[usize], scope: FrequencyScope) -> Vec<u32
 }
 
 fn code_segments(
-    segs: &[&BitSlice<u64, Lsb0>],
+    segs: &[&BitSlice<BitWord, Lsb0>],
     ones: &[u64],
     scope: FrequencyScope,
 ) -> Vec<Vec<u32>> {
@@ -82,8 +83,8 @@ pub struct SegmentReport {
 }
 
 /// The field's segments in storage order (plane levels, then the gate) and their counts of ones.
-fn segments(f: &NtcField) -> (Vec<&BitSlice<u64, Lsb0>>, Vec<u64>) {
-    let segs: Vec<&BitSlice<u64, Lsb0>> = f
+fn segments(f: &NtcField) -> (Vec<&BitSlice<BitWord, Lsb0>>, Vec<u64>) {
+    let segs: Vec<&BitSlice<BitWord, Lsb0>> = f
         .planes
         .iter()
         .map(|p| p.as_bitslice())
@@ -110,7 +111,7 @@ pub fn grid_report(f: &NtcField) -> Vec<SegmentReport> {
         .collect()
 }
 
-fn best_coding(segs: &[&BitSlice<u64, Lsb0>], ones: &[u64]) -> (FrequencyScope, Vec<Vec<u32>>) {
+fn best_coding(segs: &[&BitSlice<BitWord, Lsb0>], ones: &[u64]) -> (FrequencyScope, Vec<Vec<u32>>) {
     let a = code_segments(segs, ones, FrequencyScope::Segment);
     let b = code_segments(segs, ones, FrequencyScope::Grid);
     let size = |v: &Vec<Vec<u32>>| v.iter().map(Vec::len).sum::<usize>();
@@ -309,7 +310,7 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
         let b = r.take(s, "RNTC segment words")?;
         streams.push((at, b));
     }
-    let segs: Vec<BitVec<u64, Lsb0>> = streams
+    let segs: Vec<BitVec<BitWord, Lsb0>> = streams
         .par_iter()
         .enumerate()
         .map(|(i, &(at, b))| {
@@ -375,7 +376,11 @@ mod tests {
             gate_log2_table: 6,
         };
         let mut rng = fastrand::Rng::with_seed(9);
-        let mut bits = |n: usize| (0..n).map(|_| rng.bool()).collect::<BitVec<u64, Lsb0>>();
+        let mut bits = |n: usize| {
+            (0..n)
+                .map(|_| rng.bool())
+                .collect::<BitVec<BitWord, Lsb0>>()
+        };
         let planes = (0..6).map(|_| bits(config.level_bits())).collect();
         let gate = bits(config.gate_table());
         let mut w = |n: usize| (0..n).map(|_| rng.f32() - 0.5).collect::<Vec<f32>>();

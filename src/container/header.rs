@@ -50,9 +50,10 @@ pub enum Variant {
 }
 
 /// How GOP g >= 1 is reconstructed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub enum ResidualMode {
     /// Every GOP carries its own canonical Gaussians.
+    #[default]
     Intra = 0,
     /// GOP g = GOP g-1 + residual g.
     Sequential = 1,

@@ -7,6 +7,15 @@
 //! two-symbol model at 24-bit precision.
 
 use bitvec::prelude::*;
+
+/// The storage word of every bit vector (`planes`, `gate`, hash-grid `levels`): `u64` where
+/// bitvec has it (64-bit targets), `u32` on 32-bit ones such as wasm32 (bitvec implements
+/// `BitStore` for `u64` only when pointers are 64 bits). Same bits either way (Lsb0).
+#[cfg(target_pointer_width = "64")]
+pub type BitWord = u64;
+#[cfg(not(target_pointer_width = "64"))]
+pub type BitWord = u32;
+const WORD_BITS: usize = BitWord::BITS as usize;
 use constriction::stream::model::ContiguousCategoricalEntropyModel;
 use constriction::stream::queue::DefaultRangeEncoder;
 use constriction::stream::Encode;
@@ -29,7 +38,7 @@ fn model(p1: u32) -> Model {
 }
 
 /// Range-code `bits` with probability `p1` (from [`probability_of_one`]) into 32-bit words.
-pub fn encode(bits: &BitSlice<u64, Lsb0>, p1: u32) -> Vec<u32> {
+pub fn encode(bits: &BitSlice<BitWord, Lsb0>, p1: u32) -> Vec<u32> {
     let m = model(p1);
     let mut enc = DefaultRangeEncoder::new();
     enc.encode_iid_symbols(bits.iter().by_vals().map(usize::from), &m)
@@ -40,12 +49,12 @@ pub fn encode(bits: &BitSlice<u64, Lsb0>, p1: u32) -> Vec<u32> {
 /// Decode `n` bits; `None` if the words are not a valid stream for this model. The decoder of
 /// Appendix A specialised to the two-symbol model (`BinaryRangeDecoder::binary24`); the same
 /// bits and errors as `constriction`'s (test `fast_decode_agrees_with_constriction`).
-pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
+pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<BitWord, Lsb0>> {
     let p0 = (1u32 << PRECISION) - p1;
     let mut dec = super::binary_range_decoder::BinaryRangeDecoder::new(words);
-    let mut raw = vec![0u64; n.div_ceil(64)];
+    let mut raw = vec![0 as BitWord; n.div_ceil(WORD_BITS)];
     for i in 0..n {
-        raw[i / 64] |= (dec.binary24(p0).ok()? as u64) << (i % 64);
+        raw[i / WORD_BITS] |= (dec.binary24(p0).ok()? as BitWord) << (i % WORD_BITS);
     }
     let mut out = BitVec::from_vec(raw);
     out.truncate(n);
@@ -54,15 +63,15 @@ pub fn decode(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
 
 /// [`decode`] with `constriction`'s generic decoder (the reference for the test).
 #[cfg(test)]
-fn decode_constriction(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<u64, Lsb0>> {
+fn decode_constriction(words: Vec<u32>, n: usize, p1: u32) -> Option<BitVec<BitWord, Lsb0>> {
     use constriction::stream::queue::DefaultRangeDecoder;
     use constriction::stream::Decode;
     let m = model(p1);
     let mut dec = DefaultRangeDecoder::from_compressed(words).ok()?;
     // Assemble whole words instead of pushing bit by bit.
-    let mut raw = vec![0u64; n.div_ceil(64)];
+    let mut raw = vec![0 as BitWord; n.div_ceil(WORD_BITS)];
     for (i, s) in dec.decode_iid_symbols(n, &m).enumerate() {
-        raw[i / 64] |= (s.ok()? as u64) << (i % 64);
+        raw[i / WORD_BITS] |= (s.ok()? as BitWord) << (i % WORD_BITS);
     }
     let mut out = BitVec::from_vec(raw);
     out.truncate(n);
@@ -93,7 +102,7 @@ pub fn segment_probabilities(ones: &[u64], lens: &[usize], groups: Option<&[u8]>
 /// Code every segment with the probabilities of [`segment_probabilities`]; a constant segment
 /// (all 0 or all 1) codes to no words. Segments are coded in parallel.
 pub fn encode_segments(
-    segs: &[&BitSlice<u64, Lsb0>],
+    segs: &[&BitSlice<BitWord, Lsb0>],
     ones: &[u64],
     groups: Option<&[u8]>,
 ) -> Vec<Vec<u32>> {
@@ -119,7 +128,7 @@ pub fn decode_segment(
     n: usize,
     ones: u64,
     p1: u32,
-) -> std::result::Result<BitVec<u64, Lsb0>, String> {
+) -> std::result::Result<BitVec<BitWord, Lsb0>, String> {
     if ones == 0 || ones == n as u64 {
         return Ok(BitVec::repeat(ones != 0, n));
     }
@@ -171,7 +180,7 @@ mod tests {
                     })
                     .collect()
             } else {
-                let bits: BitVec<u64, Lsb0> = (0..n).map(|_| rng.bool()).collect();
+                let bits: BitVec<BitWord, Lsb0> = (0..n).map(|_| rng.bool()).collect();
                 encode(&bits, p1)
             };
             let a = decode(words.clone(), n, p1);
@@ -186,7 +195,7 @@ mod tests {
         let mut rng = fastrand::Rng::with_seed(7);
         for p in [0.5, 0.1, 0.01] {
             let n = 1 << 17;
-            let bits: BitVec<u64, Lsb0> = (0..n).map(|_| rng.f64() < p).collect();
+            let bits: BitVec<BitWord, Lsb0> = (0..n).map(|_| rng.f64() < p).collect();
             let ones = bits.count_ones() as u64;
             let p1 = probability_of_one(ones, n as u64);
             let words = encode(&bits, p1);

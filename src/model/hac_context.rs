@@ -12,6 +12,7 @@ use multiversion::multiversion;
 use super::hac_cdf::step;
 use super::ntc::{lookup, PLANES};
 use super::scaffold::{FEAT_DIM, N_OFFSETS, SCALING_DIM};
+use crate::entropy::binary_bits::BitWord;
 
 /// Channels of the coded attributes: feature, log-scaling, offsets.
 pub const ATTR_CHANNELS: [usize; 3] = [FEAT_DIM, SCALING_DIM, 3 * N_OFFSETS];
@@ -89,7 +90,7 @@ pub struct HacContext {
     pub q_base: [f32; 3],
     /// One bit array per level: the 3D grid's levels, then xy, xz, yz plane levels; level `l`
     /// holds `rows * features` bits, entry-major (1 = +1).
-    pub levels: Vec<BitVec<u64, Lsb0>>,
+    pub levels: Vec<BitVec<BitWord, Lsb0>>,
     pub hidden: usize,
     /// PyTorch layout: `w1[j * inputs + i]`, `w2[o * hidden + j]`.
     pub w1: Vec<f32>,
@@ -165,16 +166,17 @@ impl HacContext {
 
     /// Lookup tables and transposed weights for [`Prepared::eval`].
     pub fn prepare(&self) -> Prepared {
-        // Entry e's f bits straight from the words (bit k is bit k % 64 of word k / 64).
-        let entry = |bits: &BitVec<u64, Lsb0>, f: usize| -> Vec<u8> {
+        // Entry e's f bits straight from the words (bit k is bit k % W of word k / W).
+        const W: usize = BitWord::BITS as usize;
+        let entry = |bits: &BitVec<BitWord, Lsb0>, f: usize| -> Vec<u8> {
             let w = bits.as_raw_slice();
-            let mask = (1u64 << f) - 1;
+            let mask: BitWord = (1 << f) - 1;
             (0..bits.len() / f)
                 .map(|e| {
-                    let (i, o) = (e * f / 64, e * f % 64);
+                    let (i, o) = (e * f / W, e * f % W);
                     let mut v = w[i] >> o;
-                    if o + f > 64 {
-                        v |= w[i + 1] << (64 - o);
+                    if o + f > W {
+                        v |= w[i + 1] << (W - o);
                     }
                     (v & mask) as u8
                 })

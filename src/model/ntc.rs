@@ -10,6 +10,7 @@
 use bitvec::prelude::*;
 use rayon::prelude::*;
 
+use crate::entropy::binary_bits::BitWord;
 use crate::error::{Error, Result};
 use crate::model::residual::{AttrGroup, SET_DYNAMIC, SET_STATIC};
 use crate::model::Canonical;
@@ -27,9 +28,9 @@ pub struct NtcField {
     pub bound_max: [f32; 3],
     /// `3 * levels` bit arrays (xy levels, then xz, then yz), each `table * features` bits,
     /// entry-major: bit `e * features + f` is feature f of entry e; 1 = +1, 0 = -1.
-    pub planes: Vec<BitVec<u64, Lsb0>>,
+    pub planes: Vec<BitVec<BitWord, Lsb0>>,
     /// `gate_table` bits.
-    pub gate: BitVec<u64, Lsb0>,
+    pub gate: BitVec<BitWord, Lsb0>,
     pub mlp: NtcMlp,
     /// Attribute groups the MLP output covers, bit `g` for `AttrGroup` g; output columns follow
     /// the groups in ascending order.
@@ -408,15 +409,16 @@ impl NtcField {
 }
 
 /// One byte per entry holding its `f` feature bits (bit k = feature k).
-fn entry_masks(bits: &BitSlice<u64, Lsb0>, f: usize) -> Vec<u8> {
+fn entry_masks(bits: &BitSlice<BitWord, Lsb0>, f: usize) -> Vec<u8> {
     let n = bits.len() / f;
-    if 64 % f == 0 {
+    const W: usize = BitWord::BITS as usize;
+    if W.is_multiple_of(f) {
         // Entries never straddle a word: shift them out of the raw words directly.
         let words = bits.domain().region().map_or(&[][..], |(_, body, _)| body);
-        if words.len() * 64 == bits.len() {
-            let mask = ((1u16 << f) - 1) as u64;
+        if words.len() * W == bits.len() {
+            let mask = ((1u16 << f) - 1) as BitWord;
             return (0..n)
-                .map(|e| (words[e * f / 64] >> (e * f % 64) & mask) as u8)
+                .map(|e| (words[e * f / W] >> (e * f % W) & mask) as u8)
                 .collect();
         }
     }

@@ -38,6 +38,12 @@ pub struct MotionSpec {
     pub period: f32,
     /// Share of Gaussians that live for only part of the sequence (counts change).
     pub births: f32,
+    /// Frames as independent per-frame reconstructions would give them (0: the same Gaussians
+    /// moved): every Gaussian's position perturbed by `independent` neighbour spacings (normal,
+    /// per axis), its log-scales by 0.2x, pre-sigmoid opacity by 0.5x and SH DC by 0.1x that
+    /// (normal), and a share `0.1 x independent` (at most 0.5) of the Gaussians left out, each
+    /// frame drawn on its own: no Gaussian of one frame is exactly one of the next.
+    pub independent: f32,
     pub seed: u64,
 }
 
@@ -190,6 +196,10 @@ pub fn hard_sequence(scene: &Gaussians, spec: &MotionSpec) -> HardSequence {
             .filter(|&i| lives[i as usize].0 <= t && t <= lives[i as usize].1)
             .collect();
         rng.shuffle(&mut order);
+        if spec.independent > 0.0 {
+            let drop = (0.1 * spec.independent).min(0.5);
+            order.retain(|_| rng.f32() >= drop);
+        }
         let mut g = Gaussians::new(scene.sh_degree, 0);
         for &i in &order {
             let i = i as usize;
@@ -201,6 +211,9 @@ pub fn hard_sequence(scene: &Gaussians, spec: &MotionSpec) -> HardSequence {
             }];
             *g.positions.last_mut().expect("pushed") = x.point(scene.positions[i]);
             *g.rotations.last_mut().expect("pushed") = qmul(x.q, scene.rotations[i]);
+            if spec.independent > 0.0 {
+                perturb(&mut g, spec.independent, sp, &mut rng);
+            }
         }
         frames.push(g);
         ids.push(order);
@@ -209,6 +222,28 @@ pub fn hard_sequence(scene: &Gaussians, spec: &MotionSpec) -> HardSequence {
         frames,
         ids,
         spacing: sp,
+    }
+}
+
+/// A standard normal draw (Box-Muller).
+fn normal(rng: &mut fastrand::Rng) -> f32 {
+    let u = rng.f32().max(1e-7);
+    let v = rng.f32();
+    (-2.0 * u.ln()).sqrt() * (std::f32::consts::TAU * v).cos()
+}
+
+/// The last Gaussian of `g` as an independent reconstruction might give it (see
+/// [`MotionSpec::independent`]).
+fn perturb(g: &mut Gaussians, k: f32, spacing: f32, rng: &mut fastrand::Rng) {
+    let i = g.len() - 1;
+    for a in 0..3 {
+        g.positions[i][a] += k * spacing * normal(rng);
+        g.log_scales[i][a] += 0.2 * k * normal(rng);
+    }
+    g.opacity[i] += 0.5 * k * normal(rng);
+    let stride = g.sh_stride();
+    for c in 0..3 {
+        g.sh[i * stride + c] += 0.1 * k * normal(rng);
     }
 }
 

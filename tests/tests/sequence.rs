@@ -164,8 +164,9 @@ fn fit_and_check_clip(s: &SequenceSettings) -> Vec<u8> {
     bytes
 }
 
-/// Bad input is refused with the frame named; frames that cannot be matched start new tracks
-/// (reported as a cut) or, with cuts not allowed, are refused.
+/// Bad input is refused with the frame named; frames that cannot be matched go on as the
+/// tracks carried by the fitted motion (reported as resampled), or start new tracks (with the
+/// cut fallback, reported as a cut), or, with cuts not allowed, are refused.
 #[test]
 fn bad_sequences_are_refused_naming_the_frame() {
     let s = settings();
@@ -186,10 +187,23 @@ fn bad_sequences_are_refused_naming_the_frame() {
     };
     let e = sequence::build(vec![a.clone(), b.clone()], &strict, &mut |_, _, _| {}).unwrap_err();
     assert!(e.to_string().contains("match confidently"), "{e}");
-    let (model, report) = sequence::build(vec![a, b], &s, &mut |_, _, _| {}).unwrap();
+    let (model, report) =
+        sequence::build(vec![a.clone(), b.clone()], &s, &mut |_, _, _| {}).unwrap();
+    assert_eq!(report.resampled, vec![1]);
+    assert!(report.cuts.is_empty());
+    assert_eq!(report.slots, 4225, "the tracks went on");
+    assert!(report.pairs[0].resampled && !report.pairs[0].cut);
+    assert_eq!(model.scene.residual_mode, s.residual_mode);
+    let cut = SequenceSettings {
+        fallback: sequence::Fallback::Cut,
+        ..s.clone()
+    };
+    let (model, report) = sequence::build(vec![a, b], &cut, &mut |_, _, _| {}).unwrap();
     assert_eq!(report.cuts, vec![1]);
+    assert!(report.resampled.is_empty());
     assert_eq!(report.slots, 2 * 4225, "every track ended at the cut");
     assert_eq!(model.scene.n_dynamic, 2 * 4225);
+    assert_eq!(model.scene.residual_mode, ResidualMode::Intra);
     let e = sequence::build(vec![wave(1)], &s, &mut |_, _, _| {}).unwrap_err();
     assert!(e.to_string().contains("at least 2 frames"), "{e}");
 }

@@ -5,7 +5,9 @@
 
 use std::io::Read;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use crate::clock::Instant;
 
 use dlgs::container::gop::{GopHeader, NO_REFERENCE};
 use dlgs::container::header::Variant;

@@ -52,6 +52,10 @@ pub struct JointMatch {
     pub median_distance: f32,
     /// Median distance between neighbouring Gaussians of `a`.
     pub spacing: f32,
+    /// Each Gaussian of `a` carried into `b`'s time by the fitted displacement field (its
+    /// prediction corrected by its neighbours' matches): the motion that remains where no
+    /// consistent correspondence exists (the resampling fallback of `tracks`).
+    pub field: Vec<[f32; 3]>,
 }
 
 impl JointMatch {
@@ -254,6 +258,7 @@ fn match_from(a: &Gaussians, predicted: &[[f32; 3]], b: &Gaussians, start: Start
             max_distance: 0.0,
             median_distance: 0.0,
             spacing,
+            field: a.positions.clone(),
         };
     }
     let sig_a: Vec<[f32; SIG]> = (0..na).map(|i| signature(a, i)).collect();
@@ -422,5 +427,6 @@ fn match_from(a: &Gaussians, predicted: &[[f32; 3]], b: &Gaussians, start: Start
         max_distance,
         median_distance: median(&mut dists),
         spacing,
+        field: pred,
     }
 }

@@ -28,6 +28,7 @@ use dlgs::{Error, Result};
 pub use fit::GopFit;
 pub use joint_match::{match_joint, spacing, JointMatch};
 pub use ntc_fit::{NtcFitReport, NtcFitSettings};
+pub use tracks::Fallback;
 
 /// How a sequence is cut and fitted.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,9 +49,14 @@ pub struct SequenceSettings {
     /// consistent correspondence: new tracks begin there (`allow_cuts`) or the sequence is
     /// refused.
     pub min_confident: f64,
-    /// Where two frames cannot be matched, end every track and begin new ones (reported as a
-    /// cut) instead of refusing the sequence.
+    /// Where two frames cannot be matched, fall back (`fallback`, reported per pair) instead
+    /// of refusing the sequence.
     pub allow_cuts: bool,
+    /// What the fallback does: by default the tracks go on carried by the fitted motion within
+    /// a GOP and begin anew at the next GOP's first frame. A sequence with cuts is coded with
+    /// intra GOPs whatever `residual_mode` says (a residual cannot jump from one Gaussian to
+    /// another; intra GOPs let new tracks take the slots of ended ones).
+    pub fallback: Fallback,
     /// How GOPs after the first carry their canonical state.
     pub residual_mode: ResidualMode,
     /// Sequential mode: every K-th GOP carries its full canonical state so that a cold seek
@@ -73,6 +79,7 @@ impl Default for SequenceSettings {
             large_motion_key_interval: Some(5),
             min_confident: 0.9,
             allow_cuts: true,
+            fallback: Fallback::Resample,
             residual_mode: ResidualMode::Sequential,
             refresh_interval: 0,
             residual_field: Some(NtcFitSettings::default()),
@@ -102,6 +109,9 @@ pub struct PairReport {
     pub deaths: usize,
     /// No consistent correspondence: every track ended here (the fallback).
     pub cut: bool,
+    /// No consistent correspondence: the tracks went on carried by the fitted motion and this
+    /// frame's own Gaussians are not shown (the resampling fallback).
+    pub resampled: bool,
 }
 
 /// What building the model found, for the user.
@@ -124,6 +134,12 @@ pub struct SequenceReport {
     pub partial: usize,
     /// Frames where new tracks began because no consistent match existed.
     pub cuts: Vec<usize>,
+    /// Frames shown as the tracks carried by the fitted motion because no consistent match
+    /// existed (see [`Fallback::Resample`]).
+    pub resampled: Vec<usize>,
+    /// The residual mode the file takes: `SequenceSettings::residual_mode`, or intra where the
+    /// sequence has cuts.
+    pub residual_mode: ResidualMode,
     pub n_static: usize,
     pub n_dynamic: usize,
     pub pairs: Vec<PairReport>,
@@ -204,7 +220,7 @@ pub fn is_dynamic(frames: &[&Gaussians], i: usize, scene_size: f32) -> bool {
 
 /// Build the model of a sequence of frames (any Gaussian counts, any sort order).
 pub fn build(
-    frames: Vec<Gaussians>,
+    mut frames: Vec<Gaussians>,
     s: &SequenceSettings,
     progress: Progress,
 ) -> Result<(SequenceModel, SequenceReport)> {
@@ -238,24 +254,35 @@ pub fn build(
     }
     let total = frames.len();
     let l = s.gop_length as usize;
-    let intra = s.residual_mode == ResidualMode::Intra;
     let ts = tracks::TrackSettings {
         min_confident: s.min_confident,
         allow_cuts: s.allow_cuts,
-        reuse_slots: intra,
+        fallback: s.fallback,
         gop_length: l,
     };
-    let (tracks, pairs) = tracks::track(&frames, &ts, &mut |done, total| {
+    let min_count = frames.iter().map(Gaussians::len).min().unwrap_or(0);
+    let max_count = frames.iter().map(Gaussians::len).max().unwrap_or(0);
+    let (mut tracks, pairs) = tracks::track(&mut frames, &ts, &mut |done, total| {
         progress("matching frames", done, total)
     })?;
+    let residual_mode = if tracks.cuts.is_empty() {
+        s.residual_mode
+    } else {
+        ResidualMode::Intra
+    };
+    if residual_mode == ResidualMode::Intra {
+        tracks.pack(l);
+    }
     let mut report = SequenceReport {
         frames: total,
         gop_length: l,
         gaussians: frames[0].len(),
-        min_count: frames.iter().map(Gaussians::len).min().unwrap_or(0),
-        max_count: frames.iter().map(Gaussians::len).max().unwrap_or(0),
+        min_count,
+        max_count,
         slots: tracks.slots,
         cuts: tracks.cuts.clone(),
+        resampled: tracks.resampled.clone(),
+        residual_mode,
         pairs,
         ..Default::default()
     };
@@ -271,6 +298,7 @@ pub fn build(
     report.key_interval = key_interval;
     let s = &SequenceSettings {
         key_interval,
+        residual_mode,
         ..s.clone()
     };
     let gop_count = total.div_ceil(l);

@@ -3,11 +3,17 @@
 //! dynamic Gaussians of the file. A slot holds one track, or (with intra GOPs) a later track
 //! after its earlier one died in an earlier GOP, so within one GOP a slot shows at most one
 //! run of frames: what `LIFE` (format-spec §6.14) can say.
+//!
+//! Where two frames have no consistent correspondence (independent per-frame reconstructions,
+//! say), the [`Fallback`] decides: by default the tracks go on as their Gaussians carried by
+//! the displacement field the matcher fitted (a resampled set moved by fitted motion) until the
+//! next GOP, whose first frame begins new tracks from its own Gaussians.
 
 use dlgs::model::Gaussians;
 use dlgs::{Error, Result};
 
 use super::joint_match::{match_joint, JointMatch};
+use super::kdtree::KdTree;
 use super::PairReport;
 
 /// No Gaussian: the slot's track is not alive at this frame.
@@ -20,20 +26,36 @@ pub struct Tracks {
     pub rows: Vec<Vec<u32>>,
     /// Slots in all.
     pub slots: usize,
-    /// Frames where no consistent match with the previous frame existed: every track ended
-    /// there and new ones began (the fallback).
+    /// Frames where no consistent match with the previous frame existed and every track
+    /// ended there, new ones beginning (the fallback at a GOP's first frame, or everywhere
+    /// with [`Fallback::Cut`]).
     pub cuts: Vec<usize>,
+    /// Frames where no consistent match with the previous frame existed and the tracks went
+    /// on carried by the fitted displacement field ([`Fallback::Resample`]).
+    pub resampled: Vec<usize>,
+}
+
+/// What tracking does where two frames have no consistent correspondence.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Fallback {
+    /// Within a GOP, every track goes on as its Gaussian of the frame before, carried by the
+    /// displacement field fitted between the two frames (the frame's own Gaussians are not
+    /// shown: a resampled set with fitted motion); at a GOP's first frame, a cut. One set of
+    /// Gaussians per GOP instead of one per frame.
+    #[default]
+    Resample,
+    /// Every track ends and the frame's Gaussians begin new ones: as many Gaussians as coding
+    /// every frame on its own.
+    Cut,
 }
 
 /// What matching may do.
 #[derive(Debug, Clone, Copy)]
 pub struct TrackSettings {
     pub min_confident: f64,
-    /// Start new tracks where frames cannot be matched (else refuse the sequence).
+    /// Fall back (see `fallback`) where frames cannot be matched (else refuse the sequence).
     pub allow_cuts: bool,
-    /// Reuse the slot of a track that died in an earlier GOP (intra GOPs only: a residual
-    /// between GOPs cannot jump from one Gaussian to another).
-    pub reuse_slots: bool,
+    pub fallback: Fallback,
     pub gop_length: usize,
 }
 
@@ -56,9 +78,11 @@ impl Tracks {
     }
 }
 
-/// Match every frame onto the one before and cut the sequence into tracks.
+/// Match every frame onto the one before and cut the sequence into tracks, one slot per
+/// track (see [`Tracks::pack`]). [`Fallback::Resample`] appends the carried Gaussians to
+/// their frames.
 pub fn track(
-    frames: &[Gaussians],
+    frames: &mut [Gaussians],
     s: &TrackSettings,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Tracks, Vec<PairReport>)> {
@@ -67,10 +91,9 @@ pub fn track(
         rows: Vec::with_capacity(total),
         slots: frames[0].len(),
         cuts: Vec::new(),
+        resampled: Vec::new(),
     };
     tr.rows.push((0..frames[0].len() as u32).collect());
-    // Per slot: the last frame its current track was alive at.
-    let mut last_alive: Vec<usize> = vec![0; tr.slots];
     let mut pairs = Vec::with_capacity(total.saturating_sub(1));
     progress(1, total);
     for t in 1..total {
@@ -93,9 +116,15 @@ pub fn track(
         }
         let b = &frames[t];
         let m = match_joint(&a, &pred, b);
+        let nb = b.len();
         let consistent = m.confident_share() >= s.min_confident
             && m.matched as f64 >= 0.5 * a.len().min(b.len()) as f64;
-        let report = pair_report(t, &m, a.len(), b.len(), consistent);
+        let resample = !consistent
+            && s.allow_cuts
+            && s.fallback == Fallback::Resample
+            && !t.is_multiple_of(s.gop_length)
+            && !a.is_empty();
+        let report = pair_report(t, &m, a.len(), nb, consistent, resample);
         if !consistent && !s.allow_cuts {
             return Err(Error::input(format!(
                 "frames {} and {t}: only {:.1}% of the matched Gaussians match confidently (at \
@@ -106,7 +135,7 @@ pub fn track(
                 100.0 * m.confident_share(),
                 100.0 * s.min_confident,
                 m.matched,
-                b.len()
+                nb
             )));
         }
         let mut row = vec![NONE; tr.slots];
@@ -118,39 +147,42 @@ pub fn track(
                     None => births.push(j),
                 }
             }
+        } else if resample {
+            // The tracks go on where the fitted field carries them; this frame's own
+            // Gaussians are not shown.
+            tr.resampled.push(t);
+            let base = frames[t].len();
+            let mut carried = smooth_field(&a.positions, &m.field);
+            // Where a Gaussian's own match lands near where the field carries it, the matched
+            // position: the set stays on this frame's surface instead of drifting with the
+            // field's errors, which add up frame after frame.
+            let reach = (2.0 * m.spacing).powi(2);
+            for (j, p) in m.prev_of.iter().enumerate() {
+                if let Some(k) = p {
+                    let k = *k as usize;
+                    let q = frames[t].positions[j];
+                    let d: f32 = (0..3).map(|ax| (q[ax] - carried[k][ax]).powi(2)).sum();
+                    if d <= reach {
+                        carried[k] = q;
+                    }
+                }
+            }
+            for (k, &slot) in alive.iter().enumerate() {
+                row[slot] = (base + k) as u32;
+                frames[t].push_from(&a, k);
+                *frames[t].positions.last_mut().expect("just pushed") = carried[k];
+            }
         } else {
             tr.cuts.push(t);
-            births.extend(0..b.len());
+            births.extend(0..frames[t].len());
         }
-        // Slots free for a newborn: their track died before this GOP began.
-        let gop_start = t - t % s.gop_length;
-        let mut free: Vec<usize> = if s.reuse_slots {
-            (0..tr.slots)
-                .filter(|&x| row[x] == NONE && last_alive[x] < gop_start && prev[x] == NONE)
-                .collect()
-        } else {
-            Vec::new()
-        };
-        free.reverse();
         for j in births {
-            let slot = match free.pop() {
-                Some(x) => x,
-                None => {
-                    tr.slots += 1;
-                    row.push(NONE);
-                    last_alive.push(0);
-                    for r in &mut tr.rows {
-                        r.push(NONE);
-                    }
-                    tr.slots - 1
-                }
-            };
-            row[slot] = j as u32;
-        }
-        for (x, &r) in row.iter().enumerate() {
-            if r != NONE {
-                last_alive[x] = t;
+            tr.slots += 1;
+            row.push(NONE);
+            for r in &mut tr.rows {
+                r.push(NONE);
             }
+            row[tr.slots - 1] = j as u32;
         }
         tr.rows.push(row);
         pairs.push(report);
@@ -159,7 +191,40 @@ pub fn track(
     Ok((tr, pairs))
 }
 
-fn pair_report(t: usize, m: &JointMatch, na: usize, nb: usize, consistent: bool) -> PairReport {
+/// Neighbours over which the resampling fallback averages the fitted displacements.
+const FIELD_NEIGHBOURS: usize = 32;
+
+/// `field` (each point of `p` carried by the matcher's displacement field) with every
+/// displacement replaced by the mean of its [`FIELD_NEIGHBOURS`] nearest points' in `p`: the
+/// matcher's field is a median of 16 noisy matches per point, and carried frame after frame
+/// its point-to-point noise would scatter neighbouring Gaussians (a mean over a symmetric
+/// neighbourhood keeps a field that is locally affine, rotations of parts included).
+fn smooth_field(p: &[[f32; 3]], field: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    let tree = KdTree::new(p);
+    p.iter()
+        .map(|q| {
+            let near = tree.nearest(q, FIELD_NEIGHBOURS);
+            std::array::from_fn(|ax| {
+                let mut d: Vec<f32> = near
+                    .iter()
+                    .map(|&(n, _)| field[n as usize][ax] - p[n as usize][ax])
+                    .collect();
+                let m = d.len() / 2;
+                q[ax] + *d.select_nth_unstable_by(m, f32::total_cmp).1
+            })
+        })
+        .collect()
+}
+
+fn pair_report(
+    t: usize,
+    m: &JointMatch,
+    na: usize,
+    nb: usize,
+    consistent: bool,
+    resampled: bool,
+) -> PairReport {
+    let cut = !consistent && !resampled;
     PairReport {
         frame: t,
         confident_share: m.confident_share(),
@@ -167,9 +232,67 @@ fn pair_report(t: usize, m: &JointMatch, na: usize, nb: usize, consistent: bool)
         max_distance: m.max_distance,
         median_distance: m.median_distance,
         spacing: m.spacing,
-        births: if consistent { m.births() } else { nb },
-        deaths: if consistent { na - m.matched } else { na },
-        cut: !consistent,
+        births: if consistent {
+            m.births()
+        } else if cut {
+            nb
+        } else {
+            0
+        },
+        deaths: if consistent {
+            na - m.matched
+        } else if cut {
+            na
+        } else {
+            0
+        },
+        cut,
+        resampled,
+    }
+}
+
+impl Tracks {
+    /// With intra GOPs, let a later track take the slot of one that ended in an earlier GOP
+    /// (not at the frame just before its GOP: that frame's GOP ends on the next frame's
+    /// state), the lowest free slot first, tracks in order of birth. A residual between GOPs
+    /// cannot jump from one Gaussian to another, so only intra GOPs may share slots.
+    pub fn pack(&mut self, gop_length: usize) {
+        let total = self.rows.len();
+        let life: Vec<(usize, usize)> = (0..self.slots)
+            .map(|s| {
+                let first = (0..total).find(|&t| self.alive(t, s)).unwrap_or(0);
+                let last = (0..total).rev().find(|&t| self.alive(t, s)).unwrap_or(0);
+                (first, last)
+            })
+            .collect();
+        let mut order: Vec<usize> = (0..self.slots).collect();
+        order.sort_by_key(|&s| (life[s].0, s));
+        // Per new slot: the last frame of the track it holds.
+        let mut held: Vec<usize> = Vec::new();
+        let mut to = vec![0usize; self.slots];
+        for s in order {
+            let (first, last) = life[s];
+            let gop_start = first - first % gop_length;
+            let free = held.iter().position(|&l| l < gop_start && l + 1 < first);
+            to[s] = match free {
+                Some(x) => x,
+                None => {
+                    held.push(0);
+                    held.len() - 1
+                }
+            };
+            held[to[s]] = last;
+        }
+        for row in &mut self.rows {
+            let mut packed = vec![NONE; held.len()];
+            for (s, &r) in row.iter().enumerate() {
+                if r != NONE {
+                    packed[to[s]] = r;
+                }
+            }
+            *row = packed;
+        }
+        self.slots = held.len();
     }
 }
 
