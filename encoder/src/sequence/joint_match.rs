@@ -232,17 +232,26 @@ impl Sides<'_> {
     }
 }
 
-/// `predicted` with each Gaussian's displacement replaced by the median of its voters'.
-fn smoothed(a: &Gaussians, predicted: &[[f32; 3]], voters: &[Vec<u32>]) -> Vec<[f32; 3]> {
-    (0..a.len())
+/// Each point's `k` nearest points of `p` (itself among them): the voters of [`smoothed`].
+pub(super) fn neighbours(p: &[[f32; 3]], k: usize) -> Vec<Vec<u32>> {
+    let tree = KdTree::new(p);
+    p.iter()
+        .map(|q| tree.nearest(q, k).into_iter().map(|n| n.0).collect())
+        .collect()
+}
+
+/// `moved` (each point of `p` carried somewhere) with each point's displacement replaced by the
+/// median of its voters' (per axis).
+pub(super) fn smoothed(p: &[[f32; 3]], moved: &[[f32; 3]], voters: &[Vec<u32>]) -> Vec<[f32; 3]> {
+    (0..p.len())
         .map(|i| {
             let mut v: [Vec<f32>; 3] = Default::default();
             for &n in &voters[i] {
                 for ax in 0..3 {
-                    v[ax].push(predicted[n as usize][ax] - a.positions[n as usize][ax]);
+                    v[ax].push(moved[n as usize][ax] - p[n as usize][ax]);
                 }
             }
-            std::array::from_fn(|ax| a.positions[i][ax] + median(&mut v[ax]))
+            std::array::from_fn(|ax| p[i][ax] + median(&mut v[ax]))
         })
         .collect()
 }
@@ -273,19 +282,13 @@ fn match_from(a: &Gaussians, predicted: &[[f32; 3]], b: &Gaussians, start: Start
     let ext = extent(&a.positions).max(extent(&b.positions)).max(1e-6);
     let floor = spacing.max(1e-6 * ext);
     // Spatial neighbours in `a` that vote on each other's displacement.
-    let voters: Vec<Vec<u32>> = {
-        let tree = KdTree::new(&a.positions);
-        a.positions
-            .iter()
-            .map(|q| tree.nearest(q, VOTERS).into_iter().map(|n| n.0).collect())
-            .collect()
-    };
+    let voters = neighbours(&a.positions, VOTERS);
     // The prediction smoothed like the displacements below: one wrong velocity (a wrong match
     // of the pair before) must not carry a Gaussian away from its neighbours.
     let mut pred: Vec<[f32; 3]> = if start == Start::Plain {
         predicted.to_vec()
     } else {
-        smoothed(a, predicted, &voters)
+        smoothed(&a.positions, predicted, &voters)
     };
     let (mut r, mut sigma): (f32, [f32; SIG]) = match start {
         Start::Plain => (floor, [1e6; SIG]),

@@ -12,8 +12,7 @@
 use dlgs::model::Gaussians;
 use dlgs::{Error, Result};
 
-use super::joint_match::{match_joint, JointMatch};
-use super::kdtree::KdTree;
+use super::joint_match::{match_joint, neighbours, smoothed, JointMatch};
 use super::PairReport;
 
 /// No Gaussian: the slot's track is not alive at this frame.
@@ -195,25 +194,12 @@ pub fn track(
 const FIELD_NEIGHBOURS: usize = 32;
 
 /// `field` (each point of `p` carried by the matcher's displacement field) with every
-/// displacement replaced by the mean of its [`FIELD_NEIGHBOURS`] nearest points' in `p`: the
+/// displacement replaced by the median of its [`FIELD_NEIGHBOURS`] nearest points': the
 /// matcher's field is a median of 16 noisy matches per point, and carried frame after frame
-/// its point-to-point noise would scatter neighbouring Gaussians (a mean over a symmetric
+/// its point-to-point noise would scatter neighbouring Gaussians (a median over a symmetric
 /// neighbourhood keeps a field that is locally affine, rotations of parts included).
 fn smooth_field(p: &[[f32; 3]], field: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    let tree = KdTree::new(p);
-    p.iter()
-        .map(|q| {
-            let near = tree.nearest(q, FIELD_NEIGHBOURS);
-            std::array::from_fn(|ax| {
-                let mut d: Vec<f32> = near
-                    .iter()
-                    .map(|&(n, _)| field[n as usize][ax] - p[n as usize][ax])
-                    .collect();
-                let m = d.len() / 2;
-                q[ax] + *d.select_nth_unstable_by(m, f32::total_cmp).1
-            })
-        })
-        .collect()
+    smoothed(p, field, &neighbours(p, FIELD_NEIGHBOURS))
 }
 
 fn pair_report(
