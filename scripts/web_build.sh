@@ -34,16 +34,16 @@ if [ ! -x "$OPT" ]; then
     mkdir -p "$WASM_TARGET/npm"
     (cd "$WASM_TARGET/npm" && npm install --no-audit --no-fund binaryen@132.0.0 >/dev/null)
 fi
-"$OPT" -O3 --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext --enable-mutable-globals \
+"$OPT" -O3 --enable-simd --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext --enable-mutable-globals \
     "$OUT/pkg/dlgs_web_bg.wasm" -o "$OUT/pkg/dlgs_web_bg.opt.wasm"
 mv "$OUT/pkg/dlgs_web_bg.opt.wasm" "$OUT/pkg/dlgs_web_bg.wasm"
-cp "$MAIN/web/player/index.html" "$MAIN/web/player/js/player.js" "$MAIN/web/player/js/renderer.js" \
+cp "$MAIN/web/player/index.html" "$MAIN"/web/player/js/*.js \
     "$MAIN/web/player/serve.py" "$MAIN/web/player/package.json" "$OUT/"
 [ -f "$MAIN/web/player/README.md" ] && cp "$MAIN/web/player/README.md" "$OUT/"
 size() { stat -c %s "$1"; }
 gz() { gzip -9 -c "$1" | wc -c; }
 raw=0; zipped=0
-for f in index.html player.js renderer.js pkg/dlgs_web.js pkg/dlgs_web_bg.wasm; do
+for f in index.html player.js renderer.js camera.js stream.js decoder_worker.js pkg/dlgs_web.js pkg/dlgs_web_bg.wasm; do
     raw=$((raw + $(size "$OUT/$f"))); zipped=$((zipped + $(gz "$OUT/$f")))
 done
 echo "web bundle: $OUT (wasm $(size "$OUT/pkg/dlgs_web_bg.wasm") B, gzip $(gz "$OUT/pkg/dlgs_web_bg.wasm") B; page + JS + wasm $raw B, gzip $zipped B)"

@@ -134,6 +134,11 @@ impl CodecArgs {
             dynamic: dlgs_encoder::DynamicSettings {
                 features: if self.exact_features {
                     FeatureCodec::Exact
+                } else if let Some(bits) = self.quantised_features {
+                    FeatureCodec::Quantised {
+                        bits,
+                        predictor: None,
+                    }
                 } else {
                     FeatureCodec::Hevc(HevcSettings {
                         crf: self.crf,

@@ -59,6 +59,7 @@ fn tfea_codec_name(codec: u8) -> String {
         1 => "12-bit HEVC (TFEA codec 1)".into(),
         2 => "the reference run's own 12-bit HEVC stream (TFEA codec 2)".into(),
         3 => "intra-only 12-bit HEVC, every key decodable alone (TFEA codec 3)".into(),
+        4 => "quantised per channel + zstd, no video codec (TFEA codec 4)".into(),
         c => format!("unknown TFEA codec {c}"),
     }
 }

@@ -259,3 +259,54 @@ fn a_reader_that_goes_away_ends_the_output_quietly() {
     assert_eq!(out.status.code(), Some(141), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// `--quantised-features` (TFEA codec 4, the web player's time features): re-encoding a model
+/// writes codec 4 at the asked depth, smaller than exact features, rendering close to them; out
+/// of range depths and the exact-features flag beside it are refused.
+#[test]
+fn quantised_features_re_encode_for_web_players() {
+    let tmp = tempfile::tempdir().unwrap();
+    let m = model(tmp.path(), 2);
+    let p = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let (exact, q8) = (p("exact.dlgs"), p("q8.dlgs"));
+    dlgs(&["encode", &m, "-o", &exact, "--exact-features"]);
+    dlgs(&["encode", &m, "-o", &q8, "--quantised-features", "8"]);
+    let info = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&dlgs(&["info", f, "--json"])).unwrap()
+    };
+    let (ie, iq) = (info(&exact), info(&q8));
+    assert!(
+        iq["time_features"].as_str().unwrap().contains("codec 4"),
+        "{iq}"
+    );
+    let tfea = |i: &serde_json::Value| i["chunk_bytes_by_type"]["TFEA"].as_u64().unwrap();
+    assert!(
+        tfea(&iq) * 2 < tfea(&ie),
+        "codec 4 {} vs exact {}",
+        tfea(&iq),
+        tfea(&ie)
+    );
+    let cmp = dlgs(&[
+        "compare", &exact, &q8, "--json", "--orbit", "2", "--t", "0.37",
+    ]);
+    let psnr: f64 = serde_json::from_str::<serde_json::Value>(&cmp).unwrap()["mean_psnr"]
+        .as_f64()
+        .unwrap();
+    assert!(psnr > 50.0, "{psnr} dB");
+    for bad in ["5", "13"] {
+        let err = dlgs_fails(&["encode", &m, "-o", &q8, "--quantised-features", bad]);
+        assert!(
+            err.contains("6..=12") || err.contains("6..12"),
+            "{bad}: {err}"
+        );
+    }
+    let err = dlgs_fails(&[
+        "encode",
+        &m,
+        "-o",
+        &q8,
+        "--quantised-features",
+        "--exact-features",
+    ]);
+    assert!(err.contains("cannot be used with"), "{err}");
+}

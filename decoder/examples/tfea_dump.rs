@@ -36,6 +36,10 @@ fn main() -> dlgs::Result<()> {
             );
         }
         TfeaBody::Exact(_) => eprintln!("GOP {gop} stores exact features, not HEVC"),
+        TfeaBody::Quantised(q) => eprintln!(
+            "GOP {gop} stores features quantised to {} bits (codec 4), not HEVC",
+            q.bits
+        ),
     }
     Ok(())
 }

@@ -173,6 +173,9 @@ pub(crate) fn decode_time_features(
 ) -> Result<PlanarFeatures> {
     Ok(match tfea::decode(bytes, at, scene, limits)? {
         TfeaBody::Exact(f) => PlanarFeatures::new(&f),
+        TfeaBody::Quantised(q) => {
+            PlanarFeatures::from_columns(q.n, q.keys, q.channels, q.columns())
+        }
         TfeaBody::Hevc {
             tiling,
             ranges,

@@ -11,6 +11,7 @@ mod hevc_headers;
 pub mod interp;
 mod lru;
 pub mod panel;
+mod panel_nofma;
 pub mod pipeline;
 pub mod planar;
 mod prefix_keys;

@@ -7,6 +7,8 @@
 //! same bits (format-spec §6.4, determinism rule).
 
 use dlgs::model::Mlp;
+
+use crate::panel_nofma::{self, Lane64};
 use multiversion::multiversion;
 
 /// Rows per panel: one AVX-512 register, two AVX2 registers.
@@ -21,6 +23,8 @@ struct PanelLayer {
     outputs: usize,
     /// PyTorch layout `weights[o * inputs + i]`.
     weights: Vec<f32>,
+    /// The same widened to binary64 where `panel_nofma` evaluates the layers (else empty).
+    weights64: Vec<f64>,
 }
 
 /// An MLP ready for panel evaluation: ReLU between layers, tanh at the end if its role has it.
@@ -28,6 +32,8 @@ struct PanelLayer {
 pub struct PanelMlp {
     layers: Vec<PanelLayer>,
     tanh: bool,
+    /// Layers by `panel_nofma` (CPUs without FMA: wasm32).
+    nofma: bool,
 }
 
 /// Scratch space for the hidden layers, reused across panels of one block.
@@ -35,6 +41,8 @@ pub struct PanelMlp {
 pub struct Scratch {
     a: Vec<Lane>,
     b: Vec<Lane>,
+    /// The layer input widened to binary64 (`panel_nofma`).
+    wide: Vec<Lane64>,
 }
 
 /// `y[o] = Σ_i w[o, i] · x[i]` for every row of the panel, inputs in ascending order.
@@ -135,9 +143,24 @@ impl PanelMlp {
                     inputs: l.inputs,
                     outputs: l.outputs,
                     weights: l.weights.clone(),
+                    weights64: if cfg!(target_arch = "wasm32") {
+                        l.weights.iter().map(|&w| f64::from(w)).collect()
+                    } else {
+                        Vec::new()
+                    },
                 })
                 .collect(),
             tanh: m.role.output_tanh(),
+            nofma: cfg!(target_arch = "wasm32"),
+        }
+    }
+
+    /// One layer, by hardware FMA or (wasm32) by `panel_nofma`: the same bits.
+    fn layer(&self, x: &[Lane], l: &PanelLayer, y: &mut [Lane], wide: &mut Vec<Lane64>) {
+        if self.nofma {
+            panel_nofma::layer(x, &l.weights64, y, wide);
+        } else {
+            layer(x, &l.weights, y);
         }
     }
 
@@ -154,14 +177,14 @@ impl PanelMlp {
         debug_assert_eq!(x.len(), self.inputs());
         debug_assert_eq!(out.len(), self.outputs());
         let last = self.layers.len() - 1;
-        let Scratch { a, b } = scratch;
+        let Scratch { a, b, wide } = scratch;
         for (i, l) in self.layers.iter().enumerate() {
             let input: &[Lane] = if i == 0 { x } else { a };
             if i == last {
-                layer(input, &l.weights, out);
+                self.layer(input, l, out, wide);
             } else {
                 b.resize(l.outputs, [0.0; PANEL]);
-                layer(input, &l.weights, b);
+                self.layer(input, l, b, wide);
                 relu(b);
                 std::mem::swap(a, b);
             }

@@ -19,6 +19,11 @@ pub enum FeatureCodec {
     Exact,
     /// Tiled 12-bit images coded with libx265 (the reference's feature video).
     Hevc(HevcSettings),
+    /// `TFEA` codec 4 (since 1.19): quantised per channel to `bits` (6-12) and coded with zstd;
+    /// no video codec, so any player decodes it (the web player).
+    /// `predictor`: `None` picks per GOP the one that codes smaller; `Some(0)` none, `Some(1)`
+    /// the previous key.
+    Quantised { bits: u8, predictor: Option<u8> },
 }
 
 /// How canonical Gaussians are stored.

@@ -385,6 +385,9 @@ impl<W: Write> StreamEncoder<W> {
         let body = match (&self.cfg.dynamic.features, coded) {
             (_, Some(c)) => c.clone(),
             (FeatureCodec::Exact, None) => TfeaBody::Exact(f.clone()),
+            (FeatureCodec::Quantised { bits, predictor }, None) => {
+                TfeaBody::Quantised(tfea::Quantised::from_features(f, *bits, *predictor)?)
+            }
             (FeatureCodec::Hevc(settings), None) => {
                 let tiling = Tiling::for_count(f.n, f.keys, f.channels);
                 let ranges = tfea::ranges(f, self.cfg.dynamic.per_gop_range);

@@ -1,5 +1,6 @@
 //! The TFEA, MLPW and LAED payload parsers directly, against a fixed dynamic scene header
-//! (and the HEVC slice-header reader of `TFEA` streams, `dlgs_decoder::hevc::display_order`).
+//! (and the HEVC slice-header reader of `TFEA` streams, `dlgs_decoder::hevc::display_order`;
+//! codec 4's dequantisation).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
@@ -20,9 +21,12 @@ fuzz_target!(|data: &[u8]| {
             ld.decode_one(&vec![0.25; ld.input_dims()], &mut out);
         }
     } else if sel & 1 == 0 {
-        if let Ok(dlgs::chunks::tfea::TfeaBody::Hevc { tiling, ranges, reference, packets, intra }) =
-            dlgs::chunks::tfea::decode(body, 0, &s, &limits)
-        {
+        let tfea = dlgs::chunks::tfea::decode(body, 0, &s, &limits);
+        if let Ok(dlgs::chunks::tfea::TfeaBody::Quantised(q)) = &tfea {
+            assert_eq!(q.columns().len(), q.n * q.keys * q.channels);
+            let _ = q.features();
+        }
+        if let Ok(dlgs::chunks::tfea::TfeaBody::Hevc { tiling, ranges, reference, packets, intra }) = tfea {
             if intra {
                 // Codec 3: every packet decodes alone, as a seek does it.
                 for p in &packets {

@@ -60,7 +60,7 @@ pub fn encode<W: Write>(
     mut progress: impl FnMut(usize),
 ) -> Result<W, IngestError> {
     let scene = scene_header(gops, fps)?;
-    let pass_through = !matches!(cfg.dynamic.features, FeatureCodec::Exact);
+    let pass_through = matches!(cfg.dynamic.features, FeatureCodec::Hevc(_));
     let mut enc = StreamEncoder::new(out, scene, cfg)?;
     for (g, gop) in gops.iter().enumerate() {
         if gop.statics.len() != gops[0].statics.len()

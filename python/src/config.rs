@@ -19,6 +19,8 @@ pub struct CodecOptions {
     pub crf: u8,
     pub preset: String,
     pub exact_features: bool,
+    /// `TFEA` codec 4 at this many bits (6-12), the web player's codec.
+    pub quantised_features: Option<u8>,
     pub lossless_features: bool,
     pub intra_features: bool,
     pub fast_start: FastStart,
@@ -68,6 +70,11 @@ impl CodecOptions {
             dynamic: DynamicSettings {
                 features: if self.exact_features {
                     FeatureCodec::Exact
+                } else if let Some(bits) = self.quantised_features {
+                    FeatureCodec::Quantised {
+                        bits,
+                        predictor: None,
+                    }
                 } else {
                     FeatureCodec::Hevc(HevcSettings {
                         crf: self.crf,

@@ -55,6 +55,7 @@ fn encode_scene(
         crf: 6,
         preset: "medium".into(),
         exact_features: false,
+        quantised_features: None,
         lossless_features: false,
         intra_features: false,
         fast_start: Default::default(),

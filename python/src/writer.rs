@@ -207,7 +207,7 @@ impl Writer {
         exact_features=false, lossless_features=false, intra_features=false, per_gop_range=false,
         mlp_f16=false, zstd_level=9, residual_mode="intra", deform_model="reference",
         gop_count=None, frame_count=None, meta=None, lang_decoder=None, negatives=None,
-        progress=None, fast_start="first", max_compression=false))]
+        progress=None, fast_start="first", max_compression=false, quantised_features=None))]
     fn py_new(
         py: Python<'_>,
         path: PathBuf,
@@ -232,12 +232,19 @@ impl Writer {
         progress: Option<PyObject>,
         fast_start: &str,
         max_compression: bool,
+        quantised_features: Option<u8>,
     ) -> Res<Self> {
+        if let Some(b) = quantised_features.filter(|b| !(6..=12).contains(b)) {
+            return Err(request(format!(
+                "quantised_features={b}: must be 6 to 12 bits"
+            )));
+        }
         let codec = CodecOptions {
             quality: quality.to_owned(),
             crf,
             preset: preset.to_owned(),
             exact_features,
+            quantised_features,
             lossless_features,
             intra_features,
             fast_start: crate::config::parse_fast_start(fast_start)?,

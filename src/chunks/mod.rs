@@ -17,6 +17,7 @@ pub mod rdlt;
 pub mod rntc;
 pub mod scaffold_layers;
 pub mod tfea;
+pub mod tfea_quantised;
 
 use crate::container::{ChunkType, SceneHeader};
 use crate::{Canonical, Limits, Result};

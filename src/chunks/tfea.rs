@@ -4,6 +4,8 @@
 //! itself is produced and decoded by `dlgs-video` (FFmpeg), outside this crate.
 
 use crate::bytes::{zstd_exact, ByteReader, PutLe};
+pub use crate::chunks::tfea_quantised::Quantised;
+use crate::chunks::tfea_quantised::{self, CODEC as QUANTISED};
 use crate::container::{ChunkType, SceneHeader};
 use crate::error::{Error, FormatErrorKind, Result};
 use crate::model::TimeFeatures;
@@ -19,6 +21,8 @@ pub const TILE_COLUMNS: usize = 4;
 pub enum TfeaBody {
     /// Exact f32, `(N, K, C)` order, one zstd frame.
     Exact(TimeFeatures),
+    /// Codec 4 (since 1.19): quantised to 6-12 bits per channel, zstd, no video codec.
+    Quantised(Quantised),
     /// Quantised 12-bit tiles coded as an HEVC stream, packets in decode order.
     Hevc {
         tiling: Tiling,
@@ -260,6 +264,15 @@ pub fn encode(body: &TfeaBody, zstd_level: i32) -> Result<Vec<u8>> {
             let z = crate::bytes::zstd_compress(&raw, zstd_level)?;
             b.extend_from_slice(&z);
         }
+        TfeaBody::Quantised(q) => {
+            b.put_u8(QUANTISED);
+            b.put_u8(q.bits);
+            b.put_u16(q.channels as u16);
+            b.put_u32(q.n as u32);
+            b.put_u32(q.keys as u32);
+            b.put_u32(0);
+            tfea_quantised::encode_body(q, zstd_level, &mut b)?;
+        }
         TfeaBody::Hevc {
             tiling,
             ranges,
@@ -359,6 +372,12 @@ pub fn decode(p: &[u8], offset: u64, scene: &SceneHeader, limits: &Limits) -> Re
                 data,
             }))
         }
+        (QUANTISED, 6..=12) => Ok(TfeaBody::Quantised(tfea_quantised::decode_body(
+            &mut r,
+            (n, keys, channels, depth),
+            limits,
+            at,
+        )?)),
         (1..=3, 12) => {
             let tiling = Tiling {
                 n,

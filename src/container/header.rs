@@ -9,7 +9,7 @@ use crate::limits::Limits;
 /// The 8 magic bytes that open every `.dlgs` file.
 pub const MAGIC: [u8; 8] = [0x89, b'D', b'L', b'G', b'S', b'\r', b'\n', 0x1a];
 pub const VERSION_MAJOR: u16 = 1;
-pub const VERSION_MINOR: u16 = 18;
+pub const VERSION_MINOR: u16 = 19;
 /// Magic + major + minor.
 pub const SIGNATURE_LEN: u64 = 12;
 /// Length of a v1.0 `HEAD` payload. Longer payloads are accepted (fields are only appended).

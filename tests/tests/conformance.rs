@@ -180,7 +180,7 @@ fn path_vectors_still_take_their_paths() {
             checked += 1;
         }
     }
-    assert_eq!(checked, 12);
+    assert_eq!(checked, 14);
 }
 
 /// The `LIFE` vector's listed frames (since 1.18, §6.14): exactly the Gaussians its entries

@@ -401,13 +401,15 @@ pub const DYNAMIC_VECTOR: &str = "lod3-dynamic";
 /// The same model with intra-only HEVC time features (`TFEA` codec 3); frames listed likewise.
 pub const INTRA_VECTOR: &str = "lod3-dynamic-intra";
 /// Vectors whose decoded frames at [`FRAME_TIMES`] are listed.
-pub const FRAME_VECTORS: [&str; 6] = [
+pub const FRAME_VECTORS: [&str; 8] = [
     DYNAMIC_VECTOR,
     INTRA_VECTOR,
     paths::LERP_VECTOR,
     paths::HEVC_VECTOR,
     paths::HEVC_REFERENCE_VECTOR,
     paths::LIFE_VECTOR,
+    paths::QUANTISED_VECTOR,
+    paths::QUANTISED_KEYS_VECTOR,
 ];
 /// Vectors holding libx265 output, which may differ between x265 builds: the conformance test
 /// checks their frames against the listed ones instead of their bytes against the generator's.

@@ -145,6 +145,13 @@ fn small_dynamic(
     (m, bytes)
 }
 
+fn quantised(predictor: u8) -> dlgs_encoder::FeatureCodec {
+    dlgs_encoder::FeatureCodec::Quantised {
+        bits: 10,
+        predictor: Some(predictor),
+    }
+}
+
 fn hevc() -> dlgs_encoder::FeatureCodec {
     dlgs_encoder::FeatureCodec::Hevc(dlgs_encoder::HevcSettings {
         preset: "ultrafast".into(),
@@ -371,6 +378,10 @@ pub const HEVC_VECTOR: &str = "lod3-dynamic-hevc";
 pub const HEVC_REFERENCE_VECTOR: &str = "lod3-dynamic-hevc-ref";
 /// The `LIFE` vector (since 1.18): its frames show the hidden Gaussians' opacities at `-1e4`.
 pub const LIFE_VECTOR: &str = "lod3-dynamic-life";
+/// `TFEA` codec 4 (since 1.19): the time features quantised to 10 bits, zstd; stored as they are
+/// (predictor 0) and as key differences (predictor 1).
+pub const QUANTISED_VECTOR: &str = "lod3-dynamic-quantised";
+pub const QUANTISED_KEYS_VECTOR: &str = "lod3-dynamic-quantised-keys";
 
 pub fn all(lod3: &Gaussians) -> Vec<Vector> {
     let part = first(lod3, 256);
@@ -421,6 +432,18 @@ pub fn all(lod3: &Gaussians) -> Vec<Vector> {
             bytes: tfea_reference(lod3),
             error: None,
             about: "as lod3-dynamic-hevc with TFEA codec 2 (the reference implementation's dequantisation, one f64 range; the HEVC stream of the features tiled over one range); decoded frames in lod3-dynamic-hevc-ref.frames.f32",
+        },
+        Vector {
+            name: QUANTISED_VECTOR,
+            bytes: small_dynamic(lod3, quantised(0), DeformModel::Reference, false).1,
+            error: None,
+            about: "lod3-dynamic-hevc's scene with its time features quantised per channel to 10 bits and coded with zstd, the samples stored as they are (TFEA codec 4, predictor 0; since 1.19, the web player's codec); decoded frames in lod3-dynamic-quantised.frames.f32",
+        },
+        Vector {
+            name: QUANTISED_KEYS_VECTOR,
+            bytes: small_dynamic(lod3, quantised(1), DeformModel::Reference, false).1,
+            error: None,
+            about: "as lod3-dynamic-quantised, the samples of keys 1.. stored as zigzagged differences from the previous key modulo 2^10 (TFEA codec 4, predictor 1); decoded frames in lod3-dynamic-quantised-keys.frames.f32",
         },
         Vector {
             name: LIFE_VECTOR,
@@ -534,6 +557,17 @@ pub fn claims(name: &str, bytes: &[u8]) -> Option<Result<(), String>> {
             }
         }
         HEVC_VECTOR => first_byte(ChunkType::TFEA, 0, 1),
+        QUANTISED_VECTOR | QUANTISED_KEYS_VECTOR => {
+            // codec 4, 10 bits, the predictor (byte 16) the name says, in every GOP.
+            let want = u8::from(name == QUANTISED_KEYS_VECTOR);
+            let ps = payloads(bytes, ChunkType::TFEA).1;
+            let got: Vec<[u8; 3]> = ps.iter().map(|(_, p)| [p[0], p[1], p[16]]).collect();
+            if !got.is_empty() && got.iter().all(|g| *g == [4, 10, want]) {
+                Ok(())
+            } else {
+                Err(format!("{name}: TFEA codec, bits, predictor {got:?}"))
+            }
+        }
         HEVC_REFERENCE_VECTOR => first_byte(ChunkType::TFEA, 0, 2),
         _ => return None,
     })

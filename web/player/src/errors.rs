@@ -10,8 +10,8 @@ pub(crate) fn js_err(e: dlgs::Error) -> JsError {
     if e.name() == "NoHevcDecoder" {
         return JsError::new(
             "HevcFeatures: this file's time features are HEVC, which this GPL-free web player \
-             does not decode; re-encode it with exact time features: \
-             dlgs encode IN.dlgs -o OUT.dlgs --exact-features",
+             does not decode; re-encode it with quantised time features (TFEA codec 4, about \
+             HEVC's bytes at 6 bits): dlgs encode IN.dlgs -o OUT.dlgs --quantised-features 8",
         );
     }
     JsError::new(&format!("{}: {e}", e.name()))
