@@ -49,15 +49,16 @@ done
 echo "web bundle: $OUT (wasm $(size "$OUT/pkg/dlgs_web_bg.wasm") B, gzip $(gz "$OUT/pkg/dlgs_web_bg.wasm") B; page + JS + wasm $raw B, gzip $zipped B)"
 
 if [ "${1:-}" = "--serve" ]; then
-    DEMO=$MAIN/target/web-data/demo.dlgs
+    DEMO=$MAIN/target/web-data/demo-q8.dlgs
     if [ ! -f "$DEMO" ]; then
         DLGS=$MAIN/target/release/dlgs
         [ -x "$DLGS" ] || (cd "$MAIN" && cargo build --release -p dlgs-cli)
         mkdir -p "$(dirname "$DEMO")"
-        # A real scene (MIT donut) with SYNTHETIC motion and language, exact time features (no HEVC).
+        # A real scene (MIT donut) with SYNTHETIC motion and language, time features quantised to
+        # 8 bits (TFEA codec 4, no HEVC).
         "$DLGS" synth "${DLGS_DATA:-$MAIN/../shared/data}/ply/v3dg_donut_mipsplatting_45624_sh0.ply" \
-            -o "$DEMO" --exact-features --language --gops 3 >/dev/null
+            -o "$DEMO" --quantised-features 8 --language --gops 3 >/dev/null
     fi
-    echo "demo: http://127.0.0.1:$PORT/target/web/index.html?file=/target/web-data/demo.dlgs  (Ctrl-C stops)"
+    echo "demo: http://127.0.0.1:$PORT/target/web/index.html?file=/target/web-data/demo-q8.dlgs  (Ctrl-C stops)"
     exec python3 "$MAIN/web/player/serve.py" --dir "$MAIN" --port "$PORT"
 fi

@@ -32,23 +32,24 @@ fi
 command -v chromium >/dev/null || { echo "web_test: chromium missing (bash web/toolchain.sh install)" >&2; exit 1; }
 [ -x "$DLGS" ] || (cd "$MAIN" && cargo build --release -p dlgs-cli)
 
-# Test scene: the MIT donut (real) with SYNTHETIC motion and language, exact time features (no
-# HEVC); cameras.json of its orbit at 640x480 and the CPU renderer's image of view 0 at t = 0.5 s.
-SCENE=$WD/demo.dlgs
+# Test scene: the MIT donut (real) with SYNTHETIC motion and language, time features quantised to
+# 8 bits (TFEA codec 4: no HEVC); cameras.json of its orbit at 640x480 and the CPU renderer's
+# image of view 0 at t = 0.5 s.
+SCENE=$WD/demo-q8.dlgs
 T=0.5
 if [ ! -f "$SCENE" ]; then
-    "$DLGS" synth "$DATA/ply/v3dg_donut_mipsplatting_45624_sh0.ply" -o "$SCENE" --exact-features --language --gops 3 >/dev/null
+    "$DLGS" synth "$DATA/ply/v3dg_donut_mipsplatting_45624_sh0.ply" -o "$SCENE" --quantised-features 8 --language --gops 3 >/dev/null
 fi
 "$DLGS" cameras "$SCENE" --orbit 8 --width 640 --height 480 -o "$WD/cams.json" >/dev/null
 "$DLGS" render "$SCENE" --cameras "$WD/cams.json" --view 0 --t "$T" -o "$WD/ref.png" >/dev/null
 
 MEASURE=${1:-}
-MFILE=$WD/plant80k.dlgs
+MFILE=$WD/plant80k-q8.dlgs
 if [ "$MEASURE" = "--measure" ] && [ ! -f "$MFILE" ]; then
     # The plant (real) with 80,000 SYNTHETIC dynamic Gaussians and language: the native
-    # benchmarks' 80k configuration (docs/benchmarks/dynamic.md), exact time features.
+    # benchmarks' 80k configuration (docs/benchmarks/dynamic.md), time features quantised to 8 bits.
     "$DLGS" synth "$DATA/splat/marcelpadilla_plant.splat" -o "$MFILE" --dynamic-fraction 0.75 \
-        --max-dynamic 80000 --language --gops 3 --exact-features >/dev/null
+        --max-dynamic 80000 --language --gops 3 --quantised-features 8 >/dev/null
 fi
 
 python3 "$MAIN/web/player/serve.py" --dir "$MAIN" --port "$PORT" >/dev/null 2>&1 &
@@ -62,14 +63,15 @@ for _ in $(seq 50); do
 done
 
 rel() { echo "/${1#"$MAIN"/}"; }
-export NODE_MODULES_DIR=$NODE_DIR/node_modules SCENE=$(rel "$SCENE") CAMS=$(rel "$WD/cams.json") REF=$WD/ref.png T
-export PSNR_FLOOR=${PSNR_FLOOR:-50} PLAY_FILE=$(rel "$WD/demo.dlgs") MEASURE_FILE=$(rel "$MFILE")
-export TTFF_FILES=${TTFF_FILES:-$(rel "$WD/demo.dlgs"),$(rel "$MFILE")}
+SCENE_URL=$(rel "$SCENE")
+export NODE_MODULES_DIR=$NODE_DIR/node_modules SCENE=$SCENE_URL CAMS=$(rel "$WD/cams.json") REF=$WD/ref.png T
+export PSNR_FLOOR=${PSNR_FLOOR:-50} PLAY_FILE=$SCENE_URL MEASURE_FILE=$(rel "$MFILE")
+export TTFF_FILES=${TTFF_FILES:-$SCENE_URL,$(rel "$MFILE")}
 node "$MAIN/web/player/test/browser_test.mjs" "http://127.0.0.1:$PORT" "http://127.0.0.1:$((PORT + 1))" "$OUT" $MEASURE
 
 if [ "$MEASURE" = "--measure" ]; then
     W=$MAIN/target/web
-    echo "MEASURE bundle: wasm $(stat -c %s "$W/pkg/dlgs_web_bg.wasm") B (gzip $(gzip -9 -c "$W/pkg/dlgs_web_bg.wasm" | wc -c) B); page + JS + wasm $(cat "$W"/index.html "$W"/player.js "$W"/renderer.js "$W"/pkg/dlgs_web.js "$W"/pkg/dlgs_web_bg.wasm | wc -c) B (gzip $(for f in index.html player.js renderer.js pkg/dlgs_web.js pkg/dlgs_web_bg.wasm; do gzip -9 -c "$W/$f"; done | wc -c) B)"
+    echo "MEASURE bundle: wasm $(stat -c %s "$W/pkg/dlgs_web_bg.wasm") B (gzip $(gzip -9 -c "$W/pkg/dlgs_web_bg.wasm" | wc -c) B); page + JS + wasm $(cat "$W"/index.html "$W"/*.js "$W"/pkg/dlgs_web.js "$W"/pkg/dlgs_web_bg.wasm | wc -c) B (gzip $(for f in index.html player.js renderer.js camera.js stream.js decoder_worker.js pkg/dlgs_web.js pkg/dlgs_web_bg.wasm; do gzip -9 -c "$W/$f"; done | wc -c) B)"
     TIMING=$MAIN/target/release/examples/decode_timing
     if [ -x "$TIMING" ]; then
         echo "MEASURE native (2 threads): $("$TIMING" "$MFILE" 9)"

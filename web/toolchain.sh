@@ -4,8 +4,9 @@
 # post-processes. Everything goes to target/wasm (never the main target/). See FEASIBILITY.md.
 #
 #   web/toolchain.sh install        apt packages + wasm-bindgen-cli (cargo install --debug, ~1.5 min)
-#   web/toolchain.sh build [REPO]   build web/probe and web/bindgen-smoke of REPO (default: this
-#                                   checkout) and run their tests
+#   web/toolchain.sh build [REPO]   build the feasibility probes experiments/web/probe and
+#                                   experiments/web/bindgen-smoke of REPO (default: this checkout)
+#                                   and run their tests
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 MAIN=$(cd "$HERE/.." && pwd)
@@ -36,19 +37,20 @@ build() {
     . "$HERE/env.sh"
     export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$MAIN/target/wasm}
     local out=$CARGO_TARGET_DIR/wasm32-unknown-unknown/release
-    (cd "$repo/web/probe" && time cargo build --release $WASM_BUILD_STD_ARGS)
-    node "$HERE/probe/run_vectors.mjs" "$out/dlgs_wasm_probe.wasm" "$MAIN/format-spec/vectors"
-    (cd "$repo/web/bindgen-smoke" && time cargo build --release $WASM_BUILD_STD_ARGS)
+    local probes=$repo/experiments/web
+    (cd "$probes/probe" && time cargo build --release $WASM_BUILD_STD_ARGS)
+    node "$probes/probe/run_vectors.mjs" "$out/dlgs_wasm_probe.wasm" "$MAIN/format-spec/vectors"
+    (cd "$probes/bindgen-smoke" && time cargo build --release $WASM_BUILD_STD_ARGS)
     "$TOOLS/bin/wasm-bindgen" --target nodejs --out-dir "$CARGO_TARGET_DIR/pkg-node" "$out/dlgs_bindgen_smoke.wasm"
     "$TOOLS/bin/wasm-bindgen" --target web --out-dir "$CARGO_TARGET_DIR/pkg-web" "$out/dlgs_bindgen_smoke.wasm"
-    node "$HERE/bindgen-smoke/smoke.mjs" "$CARGO_TARGET_DIR/pkg-node"
+    node "$probes/bindgen-smoke/smoke.mjs" "$CARGO_TARGET_DIR/pkg-node"
     # Headless chromium: serve the checkout (index.html imports /target/wasm/pkg-web/...).
     if command -v chromium >/dev/null && [ "$CARGO_TARGET_DIR" = "$MAIN/target/wasm" ]; then
         (cd "$MAIN" && exec python3 -m http.server 8767 --bind 127.0.0.1 >/dev/null 2>&1) &
         local srv=$!
         sleep 1
         timeout 60 chromium --headless --no-sandbox --disable-gpu --virtual-time-budget=10000 \
-            --dump-dom http://127.0.0.1:8767/web/bindgen-smoke/index.html 2>/dev/null |
+            --dump-dom http://127.0.0.1:8767/experiments/web/bindgen-smoke/index.html 2>/dev/null |
             grep -o '<pre id="out">[^<]*' || true
         kill "$srv"
     fi
@@ -57,5 +59,5 @@ build() {
 case "${1:-}" in
     install) install ;;
     build) build "${2:-}" ;;
-    *) sed -n '2,11p' "$0"; exit 2 ;;
+    *) sed -n '2,12p' "$0"; exit 2 ;;
 esac

@@ -37,19 +37,20 @@ def parse_tfea(p, base, h):
     keys = r.u32()
     side = r.u32()
     N, K, C = h.n_dynamic, h.K, h.time_channels
-    if codec > 3:
-        raise DlgsError("Payload", base, "TFEA codec")
-    if (codec == 0) != (bd == 0) or (codec != 0 and bd != 12):
-        raise DlgsError("Payload", base + 1, "TFEA bit_depth")
-    if ch != C:
-        raise DlgsError("Payload", base + 2, "TFEA channels")
-    if n != N:
-        raise DlgsError("Payload", base + 4, "TFEA n")
-    if keys != K:
-        raise DlgsError("Payload", base + 8, "TFEA keys")
+    # §6.2 check order (stated since 1.18): channels/n/keys as one check, then the
+    # (codec, bit_depth) pair, both `Payload` at offset 0.
+    if ch != C or n != N or keys != K:
+        raise DlgsError("Payload", base, f"TFEA channels/n/keys {ch}/{n}/{keys} != {C}/{N}/{K}")
+    pair_ok = ((codec == 0 and bd == 0) or (codec in (1, 2, 3) and bd == 12)
+               or (codec == 4 and 6 <= bd <= 12))
+    if not pair_ok:
+        raise DlgsError("Payload", base, f"TFEA (codec, bit_depth) = ({codec}, {bd})")
     if codec == 0:
         raw = zstd_exact(r.d[r.p:], N * K * C * 4, r.off(), "TFEA")
         return np.frombuffer(raw, "<f4").astype(F32).reshape(N, K, C), "exact"
+    if codec == 4:
+        # side: reserved for codec 4, readers ignore it.
+        return parse_tfea_quantised(r, base, bd, N, K, C), f"quantised codec 4 ({bd} bit)"
     if not (side * side >= N and 4 * side <= 16384 and ((C + 3) // 4) * side <= 16384):
         raise DlgsError("InvalidField", base + 12, "TFEA side")
     if codec in (1, 3):
@@ -95,6 +96,55 @@ def parse_tfea(p, base, h):
             v16 = (q << 4) | (q >> 8)
             out[:, :, c] = ((v16.astype(np.float64) / 65535.0) * (hi - lo) + lo).astype(F32)
     return out, f"hevc codec {codec}"
+
+
+def parse_tfea_quantised(r, base, b, N, K, C):
+    """§6.2 codec 4 (since 1.19): per-channel b-bit samples, two byte planes in one zstd frame."""
+    po = r.off()
+    pred = r.u8()
+    if pred > 1:
+        raise DlgsError("InvalidField", po, f"TFEA predictor {pred}")
+    # §6.2 (1.19): NonFinite at the first value that is not finite; hi - lo (binary32) must be
+    # finite too (NonFinite at that pair's lo); cut short: Truncated.
+    rng = []
+    for _ in range(C):
+        lo_at = r.off()
+        lo = r.f32()
+        if not np.isfinite(lo):
+            raise DlgsError("NonFinite", lo_at, "TFEA range lo")
+        hi_at = r.off()
+        hi = r.f32()
+        if not np.isfinite(hi):
+            raise DlgsError("NonFinite", hi_at, "TFEA range hi")
+        with np.errstate(over="ignore"):
+            if not np.isfinite(F32(F32(hi) - F32(lo))):
+                raise DlgsError("NonFinite", lo_at, "TFEA range hi - lo")
+        rng.append((lo, hi))
+    fo = r.off()
+    M = N * K * C
+    raw = np.frombuffer(zstd_exact(r.d[r.p:], 2 * M, fo, "TFEA"), np.uint8)
+    z = raw[:M].astype(np.int64) + 256 * raw[M:].astype(np.int64)  # j = (k C + c) N + i
+    lim = 1 << b
+    bad = np.flatnonzero(z >= lim)
+    if bad.size:
+        raise DlgsError("InvalidField", fo, f"TFEA sample z[{bad[0]}] = {z[bad[0]]} >= 2^{b}")
+    z = z.reshape(K, C, N)
+    if pred == 1:
+        d = np.where(z & 1, -((z + 1) >> 1), z >> 1)  # zigzag
+        d[0] = z[0]  # key 0 is stored as is
+        q = np.cumsum(d, axis=0) % lim
+    else:
+        q = z
+    out = np.empty((K, C, N), F32)
+    for c in range(C):
+        lo, hi = F32(rng[c][0]), F32(rng[c][1])
+        if hi > lo:
+            # §6.2: the difference, the quotient, the product and the sum, each binary32.
+            step = F32(F32(hi - lo) / F32(lim - 1))
+            out[:, c, :] = (lo + (q[:, c, :].astype(F32) * step).astype(F32)).astype(F32)
+        else:
+            out[:, c, :] = lo
+    return np.ascontiguousarray(out.transpose(2, 0, 1))  # (N, K, C) like codec 0
 
 
 # ---------------------------------------------------------------- MLPW

@@ -126,12 +126,16 @@ if HAS_HEVC:
             negatives: Any = None,
             progress: Optional[Callable[[int, int], Any]] = None,
             fast_start: str = "first",
+            quantised_features: Optional[int] = None,
         ) -> None:
+            # quantised_features: time features quantised to this many bits (6-12) and coded
+            # with zstd (TFEA codec 4, `--quantised-features`), the web player's codec.
             self._w = _dlgs.Writer(
                 path, fps, gop_length, quality, crf, preset, exact_features, lossless_features,
                 intra_features, per_gop_range, mlp_f16, zstd_level, residual_mode, deform_model,
                 gop_count, frame_count, meta, lang_decoder,
                 None if negatives is None else _f32(negatives), progress, fast_start,
+                quantised_features=quantised_features,
             )
 
         def write_gop(

@@ -100,7 +100,8 @@ class Writer:
                  residual_mode: str, deform_model: str, gop_count: Optional[int],
                  frame_count: Optional[int], meta: Any, lang_decoder: Optional[PathLike],
                  negatives: Optional[F32], progress: Optional[Callable[[int, int], Any]],
-                 fast_start: str = "first") -> None: ...
+                 fast_start: str = "first", max_compression: bool = False,
+                 quantised_features: Optional[int] = None) -> None: ...
     def write_gop(self, static_set: Optional[Frame] = None, dynamic: Optional[Frame] = None,
                   time_features: Optional[F32] = None,
                   decoders: Optional[Mapping[str, Sequence[F32]]] = None,

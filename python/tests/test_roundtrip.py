@@ -81,6 +81,30 @@ def test_dynamic_round_trip_exact(dyn_exact, work):
     assert out.read_bytes() == cli_out.read_bytes()
 
 
+def test_quantised_features_same_bytes_as_cli(dyn_exact, work):
+    """Time features quantised to 8 bits (TFEA codec 4, the web player's codec): the CLI's
+    bytes; frames within the quantisation of the exact ones; a depth outside 6-12 refused."""
+    src = dlgs.open(dyn_exact)
+    info = src.info
+    out = work / "rewritten_q8.dlgs"
+    with dlgs.Writer(out, fps=info["fps"], gop_length=info["gop_length"],
+                     quantised_features=8) as w:
+        for g in range(info["gop_count"]):
+            d = src.gop(g)
+            w.write_gop(d["static"], d["dynamic"], d["time_features"], d["decoders"],
+                        d["scale_offsets"])
+    cli_out = work / "cli_q8.dlgs"
+    run_cli("encode", dyn_exact, "-o", cli_out, "--quantised-features", 8, "--no-meta")
+    assert out.read_bytes() == cli_out.read_bytes()
+    back = dlgs.open(out)
+    f0, f1 = src.gop(0)["time_features"], back.gop(0)["time_features"]
+    step = (f0.max(axis=(0, 1)) - f0.min(axis=(0, 1))) / 255
+    assert np.all(np.abs(f1 - f0) <= step * 0.5 + 1e-5)
+    assert not np.array_equal(f1, f0)
+    with pytest.raises(Exception, match="6 to 12"):
+        dlgs.Writer(work / "bad.dlgs", quantised_features=5)
+
+
 @pytest.mark.parametrize("fast_start", ["first", "off"])
 def test_dynamic_hevc_same_bytes_as_cli(dyn_exact, work, fast_start):
     """crf 6 HEVC time features, streamed (gop_count given): the CLI's bytes, with the

@@ -169,8 +169,10 @@ pub fn encode_body(qz: &Quantised, zstd_level: i32, out: &mut Vec<u8>) -> Result
     let (predictor, z) = best.expect("a predictor tried");
     out.put_u8(predictor);
     for &(lo, hi) in &qz.ranges {
-        if !lo.is_finite() || !hi.is_finite() {
-            return Err(Error::input("time-feature range not finite"));
+        if !lo.is_finite() || !hi.is_finite() || !(hi - lo).is_finite() {
+            return Err(Error::input(
+                "time-feature range not finite (or hi - lo overflows binary32)",
+            ));
         }
         out.put_f32(lo);
         out.put_f32(hi);
@@ -203,8 +205,18 @@ pub fn decode_body(
     }
     let mut ranges = Vec::with_capacity(channels);
     for _ in 0..channels {
+        let at_lo = r.offset();
         let lo = r.finite_f32("TFEA range lo")?;
         let hi = r.finite_f32("TFEA range hi")?;
+        // hi - lo is the first operation of the dequantisation: it must not overflow.
+        if !(hi - lo).is_finite() {
+            return Err(Error::format(
+                FormatErrorKind::NonFinite {
+                    field: "TFEA range hi - lo",
+                },
+                at_lo,
+            ));
+        }
         ranges.push((lo, hi));
     }
     let body_at = r.offset();
@@ -390,6 +402,13 @@ mod tests {
         let mut b = p.clone();
         b[17..21].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(matches!(kind(&b).format_kind(), Some(K::NonFinite { .. })));
+        // A range whose width overflows binary32: NonFinite at its lo.
+        let mut b = p.clone();
+        b[17 + 8 * 3..17 + 8 * 3 + 4].copy_from_slice(&(-3e38f32).to_le_bytes());
+        b[17 + 8 * 3 + 4..17 + 8 * 4].copy_from_slice(&3e38f32.to_le_bytes());
+        let e = kind(&b);
+        assert!(matches!(e.format_kind(), Some(K::NonFinite { .. })), "{e}");
+        assert_eq!(e.offset(), Some(1000 + 17 + 8 * 3));
         // Cut inside the ranges: Truncated; a frame of the wrong size: Decompress.
         assert!(matches!(
             kind(&p[..30]).format_kind(),

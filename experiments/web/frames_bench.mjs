@@ -1,7 +1,7 @@
 // Frames/s of the web player's wasm decoder under node (no browser, no drawing):
 //   target/wasm/tools/bin/wasm-bindgen --target nodejs --out-dir target/wasm/pkg-bench \
 //       target/wasm/wasm32-unknown-unknown/release/dlgs_web.wasm
-//   [PKG=/abs/path/dlgs_web.js] node experiments/web_frames/bench.mjs target/web-data/demo.dlgs [frames] [language 0|1]
+//   [PKG=/abs/path/dlgs_web.js] node experiments/web/frames_bench.mjs target/web-data/demo.dlgs [frames] [language 0|1]
 import { createRequire } from 'module';
 import { readFileSync } from 'fs';
 const require = createRequire(import.meta.url);

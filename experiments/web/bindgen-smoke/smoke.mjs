@@ -3,7 +3,7 @@ import fs from "node:fs";
 import { createRequire } from "node:module";
 const require = createRequire(import.meta.url);
 const pkg = require(process.argv[2] + "/dlgs_bindgen_smoke.js");
-const dir = new URL("../../format-spec/vectors/", import.meta.url).pathname;
+const dir = new URL("../../../format-spec/vectors/", import.meta.url).pathname;
 const bytes = fs.readFileSync(dir + "valid/tiny-3gop-zstd.dlgs");
 const got = pkg.gop_digests(bytes);
 const want = fs.readFileSync(dir + "expected.txt", "utf8").split("\n")

@@ -3,7 +3,7 @@
 // random-access and stream decoders) and dynamic frames bit for bit (*.frames.f32).
 import fs from "node:fs";
 import path from "node:path";
-const [wasmPath, dir = new URL("../../format-spec/vectors", import.meta.url).pathname] = process.argv.slice(2);
+const [wasmPath, dir = new URL("../../../format-spec/vectors", import.meta.url).pathname] = process.argv.slice(2);
 let inst;
 const text = (p, n) => new TextDecoder().decode(new Uint8Array(inst.exports.memory.buffer, p, n));
 const { instance } = await WebAssembly.instantiate(fs.readFileSync(wasmPath), {
