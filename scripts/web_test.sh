@@ -9,7 +9,7 @@
 #        2. screenshot of a real scene vs the CPU renderer (same camera, size, background): PSNR
 #        3. playback at the file's fps for 4 s: frames shown / dropped
 #        4. whole-file fallback when the server ignores Range; 5. typed HEVC error in the page;
-#        6. language relevance view
+#        6. language relevance view; 7. a Scaffold-GS file (the fixture run) against the CPU renderer
 #   bash scripts/web_test.sh --measure   decode time per GOP and frames/s of an 80k-dynamic file in
 #        the page, time to first frame at 20 Mbit/s + 40 ms (CDP throttling), bundle size, and the
 #        native decoder's numbers for the same file
@@ -43,6 +43,16 @@ fi
 "$DLGS" cameras "$SCENE" --orbit 8 --width 640 --height 480 -o "$WD/cams.json" >/dev/null
 "$DLGS" render "$SCENE" --cameras "$WD/cams.json" --view 0 --t "$T" -o "$WD/ref.png" >/dev/null
 
+# Scaffold-GS: the fitted fixture run (2,400 anchors from a real scene, tests/fixtures/scaffold_run)
+# with its time features quantised to 8 bits; cameras of its orbit and the CPU renderer's image.
+SCAFFOLD=$WD/scaffold-q8.dlgs
+SCAFFOLD_T=0.5
+if [ ! -f "$SCAFFOLD" ]; then
+    "$DLGS" encode "$MAIN/tests/fixtures/scaffold_run" -o "$SCAFFOLD" --quantised-features 8 >/dev/null
+fi
+"$DLGS" cameras "$SCAFFOLD" --orbit 8 --width 640 --height 480 -o "$WD/scaffold-cams.json" >/dev/null
+"$DLGS" render "$SCAFFOLD" --cameras "$WD/scaffold-cams.json" --view 0 --t "$SCAFFOLD_T" -o "$WD/scaffold-ref.png" >/dev/null
+
 MEASURE=${1:-}
 MFILE=$WD/plant80k-q8.dlgs
 if [ "$MEASURE" = "--measure" ] && [ ! -f "$MFILE" ]; then
@@ -66,6 +76,7 @@ rel() { echo "/${1#"$MAIN"/}"; }
 SCENE_URL=$(rel "$SCENE")
 export NODE_MODULES_DIR=$NODE_DIR/node_modules SCENE=$SCENE_URL CAMS=$(rel "$WD/cams.json") REF=$WD/ref.png T
 export PSNR_FLOOR=${PSNR_FLOOR:-50} PLAY_FILE=$SCENE_URL MEASURE_FILE=$(rel "$MFILE")
+export SCAFFOLD=$(rel "$SCAFFOLD") SCAFFOLD_CAMS=$(rel "$WD/scaffold-cams.json") SCAFFOLD_REF=$WD/scaffold-ref.png SCAFFOLD_T
 export TTFF_FILES=${TTFF_FILES:-$SCENE_URL,$(rel "$MFILE")}
 node "$MAIN/web/player/test/browser_test.mjs" "http://127.0.0.1:$PORT" "http://127.0.0.1:$((PORT + 1))" "$OUT" $MEASURE
 

@@ -108,6 +108,7 @@ pub fn run_hac_ingest(
     output: &Path,
     fps: u32,
     exact_features: bool,
+    quantised_features: Option<u8>,
     residual_mode: Option<&str>,
     raw_anchors: bool,
     anchor_step_scale: f32,
@@ -148,7 +149,7 @@ pub fn run_hac_ingest(
         scene.residual_mode = ResidualMode::Sequential;
     }
     let mut w = ScaffoldWriter::new(Vec::new(), scene, ZSTD_LEVEL)?;
-    let meta = serde_json::json!({
+    let mut meta = serde_json::json!({
         "source": "DLGStream reference implementation output (HAC / Scaffold-GS variant)",
         "gop_folders": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "encoder": concat!("dlgs ", env!("CARGO_PKG_VERSION")),
@@ -159,6 +160,9 @@ pub fn run_hac_ingest(
             "anchor_step_scale": anchor_step_scale,
         },
     });
+    if let Some(bits) = quantised_features {
+        meta["settings"]["quantised_features"] = bits.into();
+    }
     w.scene_chunk(ChunkType::META, &serde_json::to_vec(&meta)?)?;
     let pb = bar(gops.len() as u64, "writing");
     let (mut chunks, mut repaired, mut unverified) = (0, 0, 0);
@@ -193,6 +197,14 @@ pub fn run_hac_ingest(
             let (features, source) =
                 run::read_feature_video(&png, "_temporal_feat", &rows, n_dynamic, side, &limits)?;
             Some(match (source, exact_features) {
+                // TFEA codec 4 (format 1.19): the decoded features quantised again.
+                _ if quantised_features.is_some() => {
+                    TfeaBody::Quantised(dlgs::chunks::tfea::Quantised::from_features(
+                        &features,
+                        quantised_features.unwrap_or(12),
+                        None,
+                    )?)
+                }
                 (
                     FeatureSource::Video {
                         packets,

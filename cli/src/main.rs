@@ -309,6 +309,7 @@ fn main() -> Result<()> {
                     &output,
                     fps,
                     codec.exact_features,
+                    codec.quantised_features,
                     residual_mode.as_deref(),
                     codec.raw_anchors,
                     codec.anchor_step_scale,

@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use dlgs::chunks::laed;
 use dlgs::container::gop::NO_REFERENCE;
-use dlgs::container::{ChunkInfo, ChunkType, FileReader, SceneHeader};
+use dlgs::container::{ChunkType, FileReader, SceneHeader};
 use dlgs::model::lang_decoder::LangDecoder;
 use dlgs::model::ntc::NtcField;
 use dlgs::model::{DynamicGop, Gaussians, TimePoint};
@@ -190,17 +190,7 @@ impl<R: Read + Seek> Decoder<R> {
     /// The scene's language autoencoder decoder and canonical negatives (`LAED`, §6.8), if
     /// the file carries one. Read on demand: only queries need it.
     pub fn lang_decoder(&mut self) -> Result<Option<LangDecoder>> {
-        let Some(c) = Self::find(self.reader.scene_chunks(), ChunkType::LAED) else {
-            return Ok(None);
-        };
-        let p = self.reader.payload(&c)?;
-        let scene = self.reader.scene().clone();
-        let limits = self.reader.limits().fresh();
-        laed::decode(&p, c.payload_offset(), &scene, &limits).map(Some)
-    }
-
-    fn find(chunks: &[ChunkInfo], ty: ChunkType) -> Option<ChunkInfo> {
-        chunks.iter().find(|c| c.ty == ty).copied()
+        read_lang_decoder(&mut self.reader)
     }
 
     /// Decode GOP `g`: canonical Gaussians, time features and decoders (cached). HEVC time
@@ -529,4 +519,23 @@ fn with_room(g: &Gaussians, more: usize) -> Gaussians {
         sh,
         lang,
     }
+}
+
+/// The scene's language decoder and canonical negatives (`LAED`, §6.8) from a file of either
+/// variant, if it carries one.
+pub fn read_lang_decoder<R: Read + Seek>(
+    reader: &mut FileReader<R>,
+) -> Result<Option<LangDecoder>> {
+    let Some(c) = reader
+        .scene_chunks()
+        .iter()
+        .find(|c| c.ty == ChunkType::LAED)
+        .copied()
+    else {
+        return Ok(None);
+    };
+    let p = reader.payload(&c)?;
+    let scene = reader.scene().clone();
+    let limits = reader.limits().fresh();
+    laed::decode(&p, c.payload_offset(), &scene, &limits).map(Some)
 }

@@ -213,6 +213,11 @@ impl<R: Read + Seek> ScaffoldDecoder<R> {
         self.reader.scene()
     }
 
+    /// The container reader (scene-level chunks, GOP index).
+    pub fn reader(&mut self) -> &mut FileReader<R> {
+        &mut self.reader
+    }
+
     /// GOP `g`, decoded (the last one is kept for the next call). In a sequential scene this
     /// decodes the residual chain from the nearest GOP state held (GOP 0 at worst).
     pub fn gop(&mut self, g: u32) -> Result<Arc<ScaffoldGop>> {

@@ -95,6 +95,12 @@ const ops = {
   async draw(cam, mode, query) {
     if (frameT === null) throw new Error("Request: no frame decoded yet");
     const timings = {};
+    if (info.variant !== "Gaussians3d") {
+      // Scaffold-GS: another camera sees other neural Gaussians; decode the frame again.
+      const t1 = performance.now();
+      await dec.call(() => dec.player.frame(frameT, cam.pos[0], cam.pos[1], cam.pos[2], mode === "language"));
+      timings.frame = performance.now() - t1;
+    }
     const { n, splats } = pack(cam, mode, query, timings);
     return { value: { n, splats, timings, t: frameT }, transfer: [splats.buffer] };
   },

@@ -72,7 +72,6 @@ export class DlgsPlayer {
     this.t0 = performance.now();
     // A File is structured-cloned to the worker; a URL is resolved against the page.
     this.info = await this.worker.call("open", typeof src === "string" ? new URL(src, location.href).href : src);
-    if (this.info.variant !== "Gaussians3d") throw new Error("Unsupported: Scaffold-GS files need the camera-dependent decoder (not in the web player yet)");
     this.cam = opts.camera || null;
     await this.showFrame(0);
     this.firstFrameAt = performance.now(); // since navigation start

@@ -23,7 +23,9 @@ impl Player {
             self.relevance
                 .iter()
                 .filter(|v| v.is_finite())
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)))
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                    (a.min(v), b.max(v))
+                })
         } else {
             (0.0, 1.0)
         };
@@ -34,8 +36,16 @@ impl Player {
             let p = b.positions[i];
             let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
             let z = w2c[6] * d[0] + w2c[7] * d[1] + w2c[8] * d[2];
-            let o = if lang { b.lang_opacity[i] } else { b.opacity[i] };
-            let finite = p.iter().chain(&b.log_scales[i]).chain(&b.rotations[i]).all(|v| v.is_finite())
+            let o = if lang {
+                b.lang_opacity[i]
+            } else {
+                b.opacity[i]
+            };
+            let finite = p
+                .iter()
+                .chain(&b.log_scales[i])
+                .chain(&b.rotations[i])
+                .all(|v| v.is_finite())
                 && o.is_finite();
             if !(z > 0.2) || !finite || o < -6.0 {
                 // o < -6: sigmoid < 1/255 (alpha never reaches the threshold)
@@ -54,7 +64,11 @@ impl Player {
             let i = i as usize;
             let out = &mut self.splats[k * 16..k * 16 + 16];
             let p = b.positions[i];
-            let o = if lang { b.lang_opacity[i] } else { b.opacity[i] };
+            let o = if lang {
+                b.lang_opacity[i]
+            } else {
+                b.opacity[i]
+            };
             out[0..3].copy_from_slice(&p);
             out[3] = 1.0 / (1.0 + (-o).exp());
             let ls = b.log_scales[i];
@@ -77,12 +91,20 @@ impl Player {
             out[11] = 0.0;
             let rgb = if lang {
                 let v = self.relevance.get(i).copied().unwrap_or(0.0);
-                let u = if rmax > rmin { (v - rmin) / (rmax - rmin) } else { 0.5 };
+                let u = if rmax > rmin {
+                    (v - rmin) / (rmax - rmin)
+                } else {
+                    0.5
+                };
                 heat(if u.is_finite() { u } else { 0.0 })
             } else {
                 let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
                 let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                let d = if l > 0.0 { d.map(|v| v / l) } else { [0.0, 0.0, 1.0] };
+                let d = if l > 0.0 {
+                    d.map(|v| v / l)
+                } else {
+                    [0.0, 0.0, 1.0]
+                };
                 eval_sh(b.sh_degree, &b.sh[i * stride..(i + 1) * stride], d)
             };
             out[12..15].copy_from_slice(&rgb);
@@ -127,8 +149,20 @@ fn quat_to_mat(q: [f32; 4]) -> [[f32; 3]; 3] {
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
     let [w, x, y, z] = if n > 0.0 { q.map(|v| v / n) } else { [0.0; 4] };
     [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ]
 }

@@ -33,7 +33,14 @@ impl Player {
         language: bool,
     ) -> Result<u32, JsError> {
         self.store.borrow_mut().missing = None;
-        let d = self.dec.as_mut().ok_or_else(|| JsError::new("Request: open() first"))?;
+        if self.is_scaffold() {
+            // Scaffold-GS: the Gaussians depend on the camera, not only its view direction.
+            return self.scaffold_frame(t, [cx, cy, cz], language);
+        }
+        let d = self
+            .dec
+            .as_mut()
+            .ok_or_else(|| JsError::new("Request: open() first"))?;
         let r = (|| {
             let g = d.scene().locate(t)?.gop;
             let gop = d.gop(g)?;

@@ -20,6 +20,7 @@ mod draw;
 mod errors;
 mod frame;
 mod query;
+mod scaffold;
 mod sparse;
 
 use std::cell::RefCell;
@@ -27,6 +28,7 @@ use std::collections::BTreeMap;
 use std::rc::Rc;
 
 use dlgs::model::lang_decoder::LangDecoder;
+use dlgs_decoder::scaffold::ScaffoldDecoder;
 use dlgs_decoder::Decoder;
 use wasm_bindgen::prelude::*;
 
@@ -43,6 +45,8 @@ pub const NEED_BYTES: u32 = 1;
 pub struct Player {
     store: Rc<RefCell<Store>>,
     dec: Option<Decoder<Sparse>>,
+    /// Scaffold-GS files: the camera-dependent decoder (opened on first use).
+    scaffold: Option<ScaffoldDecoder<Sparse>>,
     buf: Buffers,
     rows: usize,
     splats: Vec<f32>,
@@ -66,6 +70,7 @@ impl Player {
                 missing: None,
             })),
             dec: None,
+            scaffold: None,
             buf: Buffers::default(),
             rows: 0,
             splats: Vec::new(),

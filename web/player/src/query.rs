@@ -28,9 +28,8 @@ impl Player {
 impl Player {
     fn laed(&mut self) -> Result<Option<&LangDecoder>, JsError> {
         if self.lang_dec.is_none() {
-            let d = self.dec()?;
             // Scene-level chunks come before GOP 0, which the page fetches first.
-            let l = d.lang_decoder().map_err(js_err)?;
+            let l = dlgs_decoder::read_lang_decoder(self.reader()?).map_err(js_err)?;
             self.lang_dec = Some(l);
         }
         Ok(self.lang_dec.as_ref().and_then(|l| l.as_ref()))
@@ -39,7 +38,6 @@ impl Player {
 
 #[wasm_bindgen]
 impl Player {
-
     /// Set the language query: a text embedding of the scene's language decoder's output width
     /// (with LAED: decoded codes, the reference's relevance score against its negatives), or of
     /// a level's code width / the whole feature width (plain cosine). `level` picks the level.
@@ -48,12 +46,14 @@ impl Player {
         if lw == 0 {
             return Err(JsError::new("Request: this scene has no language features"));
         }
-        let levels = (self.dec()?.scene().lang_levels as usize).max(1);
+        let levels = (self.reader()?.scene().lang_levels as usize).max(1);
         let code = lw / levels;
         let level = (level as usize).min(levels - 1);
         let unit = |v: &[f32]| {
             let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
-            v.iter().map(|x| if n > 0.0 { x / n } else { 0.0 }).collect::<Vec<f32>>()
+            v.iter()
+                .map(|x| if n > 0.0 { x / n } else { 0.0 })
+                .collect::<Vec<f32>>()
         };
         let laed_dims = self.laed()?.map_or(0, |l| l.embed_dims());
         if embedding.len() == lw || embedding.len() == code {
@@ -133,7 +133,6 @@ impl Player {
 }
 
 impl Player {
-
     /// Relevance of each row of the current frame to the query (empty without one).
     pub(crate) fn compute_relevance(&mut self) {
         let Some(q) = &self.query else {
@@ -165,8 +164,8 @@ impl Player {
                     let mut base = [0usize; 3];
                     let mut fr = [0.0f32; 3];
                     for a in 0..3 {
-                        let u = ((x[a] - lo[a]) / (hi[a] - lo[a])).clamp(0.0, 1.0)
-                            * (*n - 1) as f32;
+                        let u =
+                            ((x[a] - lo[a]) / (hi[a] - lo[a])).clamp(0.0, 1.0) * (*n - 1) as f32;
                         let u = if u.is_finite() { u } else { 0.0 };
                         base[a] = (u.floor() as usize).min(n - 2);
                         fr[a] = u - base[a] as f32;

@@ -100,6 +100,11 @@ impl Player {
         self.store.borrow().missing.map_or(0.0, |m| m.1 as f64)
     }
     pub fn fetched_bytes(&self) -> f64 {
-        self.store.borrow().segs.values().map(|v| v.len() as f64).sum()
+        self.store
+            .borrow()
+            .segs
+            .values()
+            .map(|v| v.len() as f64)
+            .sum()
     }
 }

@@ -29,6 +29,20 @@ const waitState = async (p, states, ms = 120000) => {
   return p.evaluate(() => JSON.parse(JSON.stringify(window.dlgsStatus)));
 };
 
+// PSNR of two PNGs (base64), computed in the page: { psnr, maxd, w, h } or { error }.
+const pagePsnr = async ([a, b]) => {
+  const px = async (b64) => {
+    const bmp = await createImageBitmap(await (await fetch("data:image/png;base64," + b64)).blob(), { colorSpaceConversion: "none", premultiplyAlpha: "none" });
+    const c = new OffscreenCanvas(bmp.width, bmp.height); const x = c.getContext("2d");
+    x.drawImage(bmp, 0, 0); return [bmp.width, bmp.height, x.getImageData(0, 0, bmp.width, bmp.height).data];
+  };
+  const [w1, h1, p] = await px(a), [w2, h2, q] = await px(b);
+  if (w1 !== w2 || h1 !== h2) return { error: `sizes ${w1}x${h1} vs ${w2}x${h2}` };
+  let se = 0, n = 0, maxd = 0;
+  for (let i = 0; i < p.length; i += 4) for (let c = 0; c < 3; c++) { const d = p[i + c] - q[i + c]; se += d * d; n++; maxd = Math.max(maxd, Math.abs(d)); }
+  return { psnr: 10 * Math.log10((255 * 255) / (se / n)), maxd, w: w1, h: h1 };
+};
+
 try {
   if (!measure) {
     // 1. Conformance vectors decoded in the page, bit for bit.
@@ -39,8 +53,8 @@ try {
     const r = await page.evaluate(() => window.runConformance());
     for (const l of r.log) console.log("  " + l);
     console.log(`conformance in the page: ${r.pass} passed, ${r.fail} failed, ${r.hevc} HEVC vectors refused with the typed HevcFeatures error`);
-    check(r.fail === 0 && r.pass >= 45 && r.framesBitForBit >= 3 && r.hevc >= 3,
-      `conformance vectors: digests, error names and dynamic frames bit for bit (${r.framesBitForBit} frame vectors)`);
+    check(r.fail === 0 && r.pass >= 55 && r.framesBitForBit >= 11 && r.hevc >= 3,
+      `conformance vectors: digests, error names and dynamic frames bit for bit (${r.framesBitForBit} frame vectors, Scaffold-GS ones included)`);
 
     // 2. Screenshot of a real scene against the CPU renderer (same cameras.json view, size, background).
     const W = 640, H = 480;
@@ -50,18 +64,7 @@ try {
     await page.evaluate(() => { const c = document.getElementById("c"); c.style.position = "fixed"; c.style.left = "0px"; c.style.top = "0px"; c.style.margin = "0"; });
     const shot = await page.screenshot({ path: `${outDir}/screenshot.png`, clip: { x: 0, y: 0, width: W, height: H } });
     const cpu = fs.readFileSync(env.REF);
-    const psnr = await page.evaluate(async ([a, b]) => {
-      const px = async (b64) => {
-        const bmp = await createImageBitmap(await (await fetch("data:image/png;base64," + b64)).blob(), { colorSpaceConversion: "none", premultiplyAlpha: "none" });
-        const c = new OffscreenCanvas(bmp.width, bmp.height); const x = c.getContext("2d");
-        x.drawImage(bmp, 0, 0); return [bmp.width, bmp.height, x.getImageData(0, 0, bmp.width, bmp.height).data];
-      };
-      const [w1, h1, p] = await px(a), [w2, h2, q] = await px(b);
-      if (w1 !== w2 || h1 !== h2) return { error: `sizes ${w1}x${h1} vs ${w2}x${h2}` };
-      let se = 0, n = 0, maxd = 0;
-      for (let i = 0; i < p.length; i += 4) for (let c = 0; c < 3; c++) { const d = p[i + c] - q[i + c]; se += d * d; n++; maxd = Math.max(maxd, Math.abs(d)); }
-      return { psnr: 10 * Math.log10((255 * 255) / (se / n)), maxd, w: w1, h: h1 };
-    }, [shot.toString("base64"), cpu.toString("base64")]);
+    const psnr = await page.evaluate(pagePsnr, [shot.toString("base64"), cpu.toString("base64")]);
     const floor = +(env.PSNR_FLOOR || 50);
     console.log(`screenshot ${outDir}/screenshot.png vs CPU renderer ${env.REF}: PSNR ${psnr.psnr?.toFixed(2)} dB (${psnr.w}x${psnr.h}, largest channel difference ${psnr.maxd}) ${psnr.error || ""}`);
     check(psnr.psnr >= floor, `screenshot PSNR >= ${floor} dB against the CPU renderer`);
@@ -115,6 +118,17 @@ try {
       const s = await p.status();
       return { nonWhite, error: p.error || null, lw: s.langWidth, laed: s.laedDims };
     });
+    // 7. A Scaffold-GS file (camera-dependent neural Gaussians) in the page against the CPU
+    // renderer, same camera and time.
+    await page.goto(`${base}/target/web/index.html?file=${env.SCAFFOLD}&camera=${env.SCAFFOLD_CAMS}&view=0&width=${W}&height=${H}&t=${env.SCAFFOLD_T}`);
+    st = await waitState(page, ["ready", "error"]);
+    check(st.state === "ready" && st.drawn > 0, `Scaffold-GS file opened and drawn (${st.error || `${st.drawn} neural Gaussians`})`);
+    await page.evaluate(() => { const c = document.getElementById("c"); c.style.position = "fixed"; c.style.left = "0px"; c.style.top = "0px"; c.style.margin = "0"; });
+    const sshot = await page.screenshot({ path: `${outDir}/scaffold.png`, clip: { x: 0, y: 0, width: W, height: H } });
+    const spsnr = await page.evaluate(pagePsnr, [sshot.toString("base64"), fs.readFileSync(env.SCAFFOLD_REF).toString("base64")]);
+    console.log(`Scaffold-GS screenshot ${outDir}/scaffold.png vs CPU renderer ${env.SCAFFOLD_REF}: PSNR ${spsnr.psnr?.toFixed(2)} dB (largest channel difference ${spsnr.maxd}) ${spsnr.error || ""}`);
+    check(spsnr.psnr >= floor, `Scaffold-GS screenshot PSNR >= ${floor} dB against the CPU renderer`);
+
     // ... and a query in the LAED decoder's output space (vector tiny-laed: 3 -> 8 -> 16 decoder,
     // two negatives): the reference's relevance score through the cosine table.
     await page.goto(`${base}/web/player/test/test.html`);

@@ -47,8 +47,30 @@ export async function runConformance(base = "/format-spec/vectors/") {
     got === err ? pass++ : (fail++, log.push(`FAIL error ${name}: ${got}, want ${err}`));
   }
   const list = await (await fetch(base + "valid/")).text(); // the server's directory listing
-  const names = [...new Set([...list.matchAll(/href="([^"]+)\.frames\.f32"/g)].map((m) => decodeURIComponent(m[1])))].filter((n) => !n.startsWith("scaffold"));
+  const all = [...new Set([...list.matchAll(/href="([^"]+)\.frames\.f32"/g)].map((m) => decodeURIComponent(m[1])))];
+  const names = all.filter((n) => !n.startsWith("scaffold"));
   let framesBitForBit = 0;
+  // Scaffold-GS vectors: the neural Gaussians of camera centre (0.4, -0.3, -2.5), language on, at
+  // the vector's times (format-spec/vectors/README.md), each frame its child count then per child
+  // 26 values (tests/src/vectors/scaffold.rs `push_frame`).
+  const scaffoldTimes = (n) => n === "scaffold-tiny-residual" ? [2.0, 2.85, 3.95] : n === "scaffold-tiny-refresh" ? [4.35, 6.0, 7.95] : [0.0, 0.85, 1.95];
+  for (const name of all.filter((n) => n.startsWith("scaffold"))) {
+    const exp = await get(`valid/${name}.frames.f32`);
+    let out;
+    try {
+      const p = open_bytes(await get(`valid/${name}.dlgs`));
+      const parts = scaffoldTimes(name).map((t) => { p.decode_gop(p.gop_at(t)); return p.scaffold_values(t, 0.4, -0.3, -2.5); });
+      p.free();
+      const total = parts.reduce((a, x) => a + x.length, 0);
+      const f = new Float32Array(total);
+      let at = 0;
+      for (const x of parts) { f.set(x, at); at += x.length; }
+      out = new Uint8Array(f.buffer);
+    } catch (e) { fail++; log.push(`FAIL scaffold frames ${name}: ${String(e.message || e)}`); continue; }
+    const same = out.length === exp.length && out.every((v, i) => v === exp[i]);
+    if (same) { pass++; framesBitForBit++; log.push(`ok scaffold frames ${name}: ${out.length / 4} f32 bit for bit`); }
+    else { fail++; log.push(`FAIL scaffold frames ${name}: ${out.length} bytes vs ${exp.length}, DIFFER`); }
+  }
   for (const name of names) {
     const exp = await get(`valid/${name}.frames.f32`);
     let out;
