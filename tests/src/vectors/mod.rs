@@ -13,6 +13,7 @@ mod dynamic;
 pub mod errors;
 pub mod paths;
 pub mod scaffold;
+pub mod scaffold_ahac;
 
 pub use dynamic::dynamic_frames;
 use dynamic::*;
