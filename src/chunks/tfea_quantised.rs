@@ -154,6 +154,24 @@ fn planes(z: &[u16]) -> Vec<u8> {
 
 /// The body after the 16-byte header, with `qz.predictor`, or else the smaller of both.
 pub fn encode_body(qz: &Quantised, zstd_level: i32, out: &mut Vec<u8>) -> Result<()> {
+    // What the reader checks, so that a hand-built `Quantised` cannot write a file it refuses.
+    let values = qz.n * qz.keys * qz.channels;
+    if !BITS.contains(&qz.bits)
+        || qz.predictor.is_some_and(|p| p > 1)
+        || qz.ranges.len() != qz.channels
+        || qz.q.len() != values
+        || qz.q.iter().any(|&q| u32::from(q) >= 1 << qz.bits)
+    {
+        return Err(Error::input(format!(
+            "quantised time features: bits {} (6-12), predictor {:?} (0 or 1), {} ranges for {} \
+             channels, {} samples for {values}, each below 2^bits",
+            qz.bits,
+            qz.predictor,
+            qz.ranges.len(),
+            qz.channels,
+            qz.q.len()
+        )));
+    }
     let mut best: Option<(u8, Vec<u8>)> = None;
     let tried: &[u8] = match qz.predictor {
         Some(0) => &[0],
@@ -434,6 +452,16 @@ mod tests {
             "{e}"
         );
         assert_eq!(e.offset(), Some(1000 + 17 + 16 * 8));
+        // The writer refuses a hand-built body the reader would refuse.
+        let mut hand = q.clone();
+        hand.q[0] = 1024;
+        assert!(encode(&TfeaBody::Quantised(hand), 3).is_err());
+        let mut hand = q.clone();
+        hand.predictor = Some(2);
+        assert!(encode(&TfeaBody::Quantised(hand), 3).is_err());
+        let mut hand = q.clone();
+        hand.ranges.pop();
+        assert!(encode(&TfeaBody::Quantised(hand), 3).is_err());
         // The writer refuses depths outside 6..=12, a predictor above 1 and non-finite features.
         assert!(Quantised::from_features(&feats(5), 5, None).is_err());
         assert!(Quantised::from_features(&feats(5), 13, None).is_err());

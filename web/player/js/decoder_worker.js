@@ -6,7 +6,8 @@
 //   open(src)                          URL or File -> file info (JSON of Player.info)
 //   show(t, cam, mode, query)          decode the GOP holding t if needed, the frame at t, sort and
 //                                      pack for cam -> {n, splats (transferred), timings, orbit}
-//   draw(cam, mode, query)             re-sort and pack the current frame for another camera
+//   draw(cam, mode, query, t)          the frame at t again (re-sorted, or decoded again when
+//                                      needed) for another camera or mode
 //   size(width, height)                the default camera's image size
 //   status()                           bytes fetched, requests, language widths
 import init from "./pkg/dlgs_web.js";
@@ -39,15 +40,19 @@ async function ensureGop(g, timings) {
   if (g + 1 < info.gop_count) dec.fetchGop(g + 1);
 }
 
-// The default view: an orbit around the median of the frame's positions.
-function defaultOrbit() {
-  const p = dec.player, n = p.rows();
-  const pos = f32(p.positions_ptr(), n * 3);
+// The default view: an orbit around the median of the frame's positions (Scaffold-GS: of the
+// anchors at t, as the CLI's orbit cameras; the neural Gaussians depend on the camera).
+function defaultOrbit(t) {
+  const p = dec.player;
+  let pos, n;
+  if (info.variant !== "Gaussians3d") { pos = p.anchor_positions(t); n = pos.length / 3; }
+  else { n = p.rows(); pos = f32(p.positions_ptr(), n * 3); }
+  if (n === 0) return { center: [0, 0, 0], dist: 4, yaw: 0, pitch: 0.3 };
   const xs = [[], [], []];
   for (let i = 0; i < n; i += Math.max(1, (n / 5000) | 0)) for (let a = 0; a < 3; a++) xs[a].push(pos[i * 3 + a]);
   const med = xs.map((v) => v.sort((a, b) => a - b)[v.length >> 1]);
   const q = (v, f) => v[Math.floor(f * (v.length - 1))];
-  const rad = Math.max(...xs.map((v) => (q(v, 0.95) - q(v, 0.05)) / 2));
+  const rad = Math.max(...xs.map((v) => (q(v, 0.95) - q(v, 0.05)) / 2)) || 1;
   return { center: med, dist: 1.6 * 2 * rad, yaw: 0, pitch: 0.3 };
 }
 
@@ -83,7 +88,7 @@ const ops = {
     let orbit = null;
     if (!cam) {
       // View-dependent decoders need the camera: decode again from the default one.
-      orbit = defaultOrbit();
+      orbit = defaultOrbit(t);
       cam = orbitCamera(orbit.center, orbit.dist, orbit.yaw, orbit.pitch, width, height);
       dec.player.frame(t, cam.pos[0], cam.pos[1], cam.pos[2], language);
     }
@@ -92,14 +97,19 @@ const ops = {
     const { n, splats } = pack(cam, mode, query, timings);
     return { value: { n, splats, timings, orbit, cam, t, stats: dec.stats }, transfer: [splats.buffer] };
   },
-  async draw(cam, mode, query) {
+  // The frame at t (the one on screen) for another camera or mode: decoded again when the
+  // worker's last frame is another one (it decodes one ahead while playing) or the Gaussians
+  // depend on the camera (Scaffold-GS).
+  async draw(cam, mode, query, t) {
     if (frameT === null) throw new Error("Request: no frame decoded yet");
     const timings = {};
-    if (info.variant !== "Gaussians3d") {
-      // Scaffold-GS: another camera sees other neural Gaussians; decode the frame again.
+    const at = t ?? frameT;
+    if (at !== frameT || info.variant !== "Gaussians3d") {
       const t1 = performance.now();
-      await dec.call(() => dec.player.frame(frameT, cam.pos[0], cam.pos[1], cam.pos[2], mode === "language"));
+      await ensureGop(dec.player.gop_at(at), timings);
+      await dec.call(() => dec.player.frame(at, cam.pos[0], cam.pos[1], cam.pos[2], mode === "language"));
       timings.frame = performance.now() - t1;
+      frameT = at;
     }
     const { n, splats } = pack(cam, mode, query, timings);
     return { value: { n, splats, timings, t: frameT }, transfer: [splats.buffer] };

@@ -32,6 +32,7 @@ export class DecoderWorker {
     this.worker.onmessage = (e) => {
       const { id, value, error } = e.data;
       const w = this.waiting.get(id);
+      if (!w) return; // already failed by onerror
       this.waiting.delete(id);
       if (error !== undefined) w.reject(new Error(error)); else w.resolve(value);
     };
@@ -114,7 +115,7 @@ export class DlgsPlayer {
   async draw() {
     const q = this.mode === "language" ? this.query : null;
     if (q) this.query = null;
-    this.present(await this.worker.call("draw", this.cam, this.mode, q));
+    this.present(await this.worker.call("draw", this.cam, this.mode, q, this.t));
   }
   seek(t) { return this.showFrame(t); }
   setMode(m) { this.mode = m; }
@@ -127,28 +128,36 @@ export class DlgsPlayer {
   play() {
     if (this.playing) return;
     this.playing = true;
+    const token = (this.playToken = (this.playToken || 0) + 1); // one loop at a time
     const fps = this.info.fps, frames = this.info.frame_count;
     const startFrame = Math.round(this.t * fps);
     const start = performance.now();
     const due = (ms) => startFrame + Math.floor(((ms - start) / 1000) * fps);
     let shownIdx = startFrame;
-    let ahead = null; // [frame index, Promise]: requested before the previous frame was drawn
+    let ahead = null; // [frame index, Promise, camera]: requested before the previous draw
     let period = 1000 / fps;
+    const live = () => this.playing && token === this.playToken;
     const tick = async () => {
-      if (!this.playing) return;
+      if (!live()) return;
       const want = due(performance.now());
       if (want >= frames) { this.stats.dropped += Math.max(0, frames - 1 - shownIdx); this.playing = false; this.onend && this.onend(); return; }
       try {
-        if (want > shownIdx && !(ahead && ahead[0] > want)) {
+        if (want > shownIdx && !(ahead && ahead[0] > want && ahead[2] === this.cam)) {
           const began = performance.now();
           let r;
-          if (ahead && ahead[0] === want) r = await ahead[1];
+          // A frame asked ahead is used if it is the one due and was sorted for this camera.
+          if (ahead && ahead[0] === want && ahead[2] === this.cam) r = await ahead[1];
           else { if (ahead) await ahead[1].catch(() => {}); r = await this.request(this.frameTime(want)); }
           ahead = null;
+          if (!live()) return;
           this.stats.dropped += want - shownIdx - 1;
           // Ask for the frame that will be due once this one is drawn.
           const next = Math.max(want + 1, due(performance.now() + period));
-          if (next < frames) ahead = [next, this.request(this.frameTime(next))];
+          if (next < frames) {
+            const p = this.request(this.frameTime(next));
+            p.catch(() => {}); // a pause or an error may leave it unused
+            ahead = [next, p, this.cam];
+          }
           this.present(r);
           shownIdx = want;
           this.stats.shown++;

@@ -77,6 +77,16 @@ impl Player {
 
 #[wasm_bindgen]
 impl Player {
+    /// The anchors' positions at `t` (x, y, z each; Scaffold-GS), where the CLI's orbit
+    /// cameras look (`anchor_stand_ins`). Empty when bytes are missing.
+    pub fn anchor_positions(&mut self, t: f64) -> Result<Vec<f32>, JsError> {
+        self.store.borrow_mut().missing = None;
+        let r = self.scaffold()?.anchor_stand_ins(t);
+        Ok(status(self, r)?
+            .map(|g| g.positions.iter().flatten().copied().collect())
+            .unwrap_or_default())
+    }
+
     /// A Scaffold-GS frame as the conformance vectors list it (`valid/scaffold*.frames.f32`):
     /// the child count, then per child position, linear scales, rotation, colour, opacity,
     /// language opacity and the 9 language values (language on). Empty when bytes are missing.

@@ -128,6 +128,10 @@ try {
     const spsnr = await page.evaluate(pagePsnr, [sshot.toString("base64"), fs.readFileSync(env.SCAFFOLD_REF).toString("base64")]);
     console.log(`Scaffold-GS screenshot ${outDir}/scaffold.png vs CPU renderer ${env.SCAFFOLD_REF}: PSNR ${spsnr.psnr?.toFixed(2)} dB (largest channel difference ${spsnr.maxd}) ${spsnr.error || ""}`);
     check(spsnr.psnr >= floor, `Scaffold-GS screenshot PSNR >= ${floor} dB against the CPU renderer`);
+    // Without a camera: the default orbit around the anchors (as the CLI's orbit cameras).
+    await page.goto(`${base}/target/web/index.html?file=${env.SCAFFOLD}&width=160&height=120`);
+    st = await waitState(page, ["ready", "error"]);
+    check(st.state === "ready" && st.drawn > 1000, `Scaffold-GS file from the default orbit around its anchors (${st.error || `${st.drawn} neural Gaussians`})`);
 
     // ... and a query in the LAED decoder's output space (vector tiny-laed: 3 -> 8 -> 16 decoder,
     // two negatives): the reference's relevance score through the cosine table.
