@@ -11,6 +11,9 @@ use dlgs::model::Mlp;
 use crate::panel_nofma::{self, Lane64};
 use multiversion::multiversion;
 
+/// Layers by `panel_nofma` on CPUs without an FMA instruction (wasm32).
+const NO_FMA: bool = cfg!(target_arch = "wasm32");
+
 /// Rows per panel: one AVX-512 register, two AVX2 registers.
 pub const PANEL: usize = 16;
 
@@ -32,8 +35,6 @@ struct PanelLayer {
 pub struct PanelMlp {
     layers: Vec<PanelLayer>,
     tanh: bool,
-    /// Layers by `panel_nofma` (CPUs without FMA: wasm32).
-    nofma: bool,
 }
 
 /// Scratch space for the hidden layers, reused across panels of one block.
@@ -143,7 +144,7 @@ impl PanelMlp {
                     inputs: l.inputs,
                     outputs: l.outputs,
                     weights: l.weights.clone(),
-                    weights64: if cfg!(target_arch = "wasm32") {
+                    weights64: if NO_FMA {
                         l.weights.iter().map(|&w| f64::from(w)).collect()
                     } else {
                         Vec::new()
@@ -151,13 +152,12 @@ impl PanelMlp {
                 })
                 .collect(),
             tanh: m.role.output_tanh(),
-            nofma: cfg!(target_arch = "wasm32"),
         }
     }
 
     /// One layer, by hardware FMA or (wasm32) by `panel_nofma`: the same bits.
     fn layer(&self, x: &[Lane], l: &PanelLayer, y: &mut [Lane], wide: &mut Vec<Lane64>) {
-        if self.nofma {
+        if NO_FMA {
             panel_nofma::layer(x, &l.weights64, y, wide);
         } else {
             layer(x, &l.weights, y);
