@@ -1,5 +1,6 @@
 //! `dlgs`: encode, inspect, decode and render `.dlgs` streams.
 
+mod anchor_steps;
 mod cameras_arg;
 mod codec_args;
 mod codec_config;
@@ -318,7 +319,7 @@ fn main() -> Result<()> {
                 ingest_cmd::run_ingest(&input, &output, &codec, fps)
             } else if let [one] = input.as_slice() {
                 if scene_io::is_dlgs(one) && scene_io::is_scaffold(one)? {
-                    scaffold_recode_cmd::run(one, &output, codec.anchor_step_scale)
+                    scaffold_recode_cmd::run(one, &output, &codec)
                 } else {
                     encode_cmd::run_encode(one, &output, &codec, residual_mode.as_deref())
                 }

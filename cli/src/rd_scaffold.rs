@@ -38,7 +38,7 @@ fn decode_ms_per_frame(file: &Path, cams: &[Camera]) -> Result<f64> {
 }
 
 /// PSNR of two language feature images with the given peak (`inf` if identical).
-fn feature_psnr(a: &[f32], b: &[f32], peak: f64) -> f64 {
+pub(crate) fn feature_psnr(a: &[f32], b: &[f32], peak: f64) -> f64 {
     let mse = a
         .iter()
         .zip(b)
@@ -53,7 +53,7 @@ fn feature_psnr(a: &[f32], b: &[f32], peak: f64) -> f64 {
 }
 
 /// The language images' peak: the range of the reference's values (1 if they are constant).
-fn feature_peak(images: &[Image]) -> f64 {
+pub(crate) fn feature_peak(images: &[Image]) -> f64 {
     let (lo, hi) = images
         .iter()
         .filter_map(|i| i.features.as_deref())

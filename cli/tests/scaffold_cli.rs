@@ -424,8 +424,8 @@ fn rd_sweeps_the_anchor_steps_of_a_scaffold_file() {
     );
 }
 
-/// A file with raw anchors (`--raw-anchors`) re-encoded: its `ANCR` becomes `AHAC` with the
-/// per-channel prior model, smaller, rendering within 60 dB of the raw file; a coarser step is
+/// A file with raw anchors (`--raw-anchors`) re-encoded with `--anchor-prior`: its `ANCR`
+/// becomes `AHAC` with the per-channel prior model, smaller, rendering within 60 dB of the raw file; a coarser step is
 /// smaller still and renders further from it.
 #[test]
 fn raw_anchors_are_hac_coded_with_the_prior_on_re_encode() {
@@ -451,6 +451,7 @@ fn raw_anchors_are_hac_coded_with_the_prior_on_re_encode() {
             &out,
             "--anchor-step-scale",
             k,
+            "--anchor-prior",
         ]);
         let text = String::from_utf8_lossy(&o.stdout);
         assert!(
@@ -459,7 +460,7 @@ fn raw_anchors_are_hac_coded_with_the_prior_on_re_encode() {
             String::from_utf8_lossy(&o.stderr)
         );
         assert!(
-            text.contains("1 from raw anchors with the per-channel prior"),
+            text.contains("coded with the per-channel prior (--anchor-prior)"),
             "{text}"
         );
         let info = String::from_utf8_lossy(&run(&["info", &out]).stdout).to_string();

@@ -6,6 +6,7 @@
 //! against what the decoder will reconstruct); and, for dynamic scenes, the key time features
 //! (`TFEA`, 12-bit HEVC or exact) and the deformation decoders (`MLPW`).
 
+mod adam;
 pub mod bit_allocation;
 pub mod colour_refit;
 pub mod config;
@@ -17,6 +18,7 @@ pub mod orientation;
 pub mod quality_search;
 mod refit_stage;
 pub mod scaffold;
+pub mod scaffold_fit;
 pub mod scaffold_prior;
 pub mod scaffold_recode;
 pub mod sequence;

@@ -4,8 +4,9 @@
 //! every other chunk is copied byte for byte. Residual GOPs (`RNTC`) then apply to the
 //! requantised anchors, exactly as in a file written from the HAC run with
 //! `--anchor-step-scale k` (the same `AHAC` bytes when the file was written with k = 1).
-//! Raw anchors (`ANCR`) have no context model: they are HAC-coded with the per-channel prior
-//! of [`crate::scaffold_prior`] at `k` times [`DEFAULT_PRIOR_STEPS`].
+//! Raw anchors (`ANCR`) have no context model: they are HAC-coded either with a context model
+//! fitted to them ([`crate::scaffold_fit`], [`RawAnchorCoding::Fitted`]) or with the
+//! per-channel prior of [`crate::scaffold_prior`] ([`RawAnchorCoding::Prior`], fast).
 
 use std::io::{Read, Seek};
 
@@ -14,10 +15,30 @@ use dlgs::container::header::Variant;
 use dlgs::container::{ChunkType, FileReader, Writer};
 use dlgs::{Error, Limits, Result};
 
+use crate::scaffold_fit::{fit_anchors, ContextFitReport, ContextFitSettings};
 use crate::scaffold_prior::{prior_anchors, DEFAULT_PRIOR_STEPS};
 
+/// How raw (`ANCR`) anchors are HAC-coded.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RawAnchorCoding {
+    /// The per-channel prior at these steps (feature, log-scaling, offsets): fast.
+    Prior([f32; 3]),
+    /// A context model fitted to each GOP's anchors (its steps are the settings').
+    Fitted(ContextFitSettings),
+}
+
+impl RawAnchorCoding {
+    /// The steps raw anchors are quantised with.
+    pub fn steps(&self) -> [f32; 3] {
+        match self {
+            RawAnchorCoding::Prior(s) => *s,
+            RawAnchorCoding::Fitted(f) => f.steps,
+        }
+    }
+}
+
 /// What [`recode_anchor_steps`] changed.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct RecodeReport {
     /// `AHAC` chunks re-coded (one per intra GOP).
     pub ahac_chunks: usize,
@@ -26,6 +47,8 @@ pub struct RecodeReport {
     /// Their payload bytes before and after.
     pub ahac_bytes_before: u64,
     pub ahac_bytes_after: u64,
+    /// Per raw GOP coded with a fitted model: what the fit reached.
+    pub fits: Vec<ContextFitReport>,
 }
 
 /// `META` with `settings.anchor_step_scale` multiplied by `k` (the steps are now `k` times
@@ -59,6 +82,20 @@ pub fn recode_anchor_steps<R: Read + Seek>(
     k: f32,
     zstd_level: i32,
     limits: Limits,
+) -> Result<(Vec<u8>, RecodeReport)> {
+    let raw = RawAnchorCoding::Prior(DEFAULT_PRIOR_STEPS.map(|q| q * k));
+    recode_anchors(src, k, &raw, zstd_level, limits, &mut |_, _| {})
+}
+
+/// [`recode_anchor_steps`] with raw anchors coded as `raw` says. `progress(done, total)`
+/// reports the fits' iterations, over all raw GOPs.
+pub fn recode_anchors<R: Read + Seek>(
+    src: R,
+    k: f32,
+    raw: &RawAnchorCoding,
+    zstd_level: i32,
+    limits: Limits,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<u8>, RecodeReport)> {
     if !(k.is_finite() && k > 0.0) {
         return Err(Error::input(format!(
@@ -95,7 +132,14 @@ pub fn recode_anchor_steps<R: Read + Seek>(
                 ChunkType::ANCR => {
                     let anchors = ancr::decode(&p, c.payload_offset(), &scene, &limits)?;
                     report.from_raw += 1;
-                    prior_anchors(&anchors, DEFAULT_PRIOR_STEPS.map(|q| q * k))?
+                    match raw {
+                        RawAnchorCoding::Prior(steps) => prior_anchors(&anchors, *steps)?,
+                        RawAnchorCoding::Fitted(settings) => {
+                            let (hac, fit) = fit_anchors(&anchors, settings, &mut *progress)?;
+                            report.fits.push(fit);
+                            hac
+                        }
+                    }
                 }
                 _ => {
                     w.gop_chunk(c.ty, c.flags, &p)?;

@@ -180,13 +180,18 @@ pub fn encode(
     scene: &SceneHeader,
     zstd_level: i32,
 ) -> Result<(Vec<u8>, AhacSizes)> {
+    if h.n_static != scene.n_static || h.n_dynamic != scene.n_dynamic {
+        return Err(Error::input("AHAC: anchor counts differ from the scene's"));
+    }
+    encode_payload(h, zstd_level)
+}
+
+/// Serialise without a scene: the payload [`encode`] writes for a scene with these counts.
+pub fn encode_payload(h: &HacAnchors, zstd_level: i32) -> Result<(Vec<u8>, AhacSizes)> {
     let c = &h.context;
     c.validate()
         .map_err(|e| Error::input(format!("AHAC: {e}")))?;
     let n = n_anchors(h);
-    if h.n_static != scene.n_static || h.n_dynamic != scene.n_dynamic {
-        return Err(Error::input("AHAC: anchor counts differ from the scene's"));
-    }
     if h.quantized.len() != n
         || (0..3).any(|a| h.symbols[a].len() != n * ATTR_CHANNELS[a])
         || !(1..=MAX_BATCH).contains(&h.batch)

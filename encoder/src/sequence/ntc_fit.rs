@@ -23,6 +23,8 @@ use dlgs::model::ntc::{groups_in, lookup, NtcConfig, NtcField, NtcMlp, PLANES};
 use dlgs::model::residual::SET_DYNAMIC;
 use dlgs::model::Gaussians;
 
+use crate::adam::Adam;
+
 /// Size and schedule of a fitted field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NtcFitSettings {
@@ -135,30 +137,6 @@ pub fn offset_rows(reference: &Gaussians, target: &Gaussians, mask: u8) -> Vec<f
 
 /// One block's gradients: of the MLP parameters, and of the latents as (index, value) pairs.
 type BlockGradients = (Vec<f32>, Vec<(u32, f32)>);
-
-struct Adam {
-    m: Vec<f32>,
-    v: Vec<f32>,
-}
-
-impl Adam {
-    fn new(n: usize) -> Self {
-        Adam {
-            m: vec![0.0; n],
-            v: vec![0.0; n],
-        }
-    }
-    fn step(&mut self, x: &mut [f32], g: &[f32], lr: f32, t: usize) {
-        let (b1, b2) = (0.9f32, 0.999f32);
-        let c1 = 1.0 - b1.powi(t as i32);
-        let c2 = 1.0 - b2.powi(t as i32);
-        for i in 0..x.len() {
-            self.m[i] = b1 * self.m[i] + (1.0 - b1) * g[i];
-            self.v[i] = b2 * self.v[i] + (1.0 - b2) * g[i] * g[i];
-            x[i] -= lr * (self.m[i] / c1) / ((self.v[i] / c2).sqrt() + 1e-8);
-        }
-    }
-}
 
 /// Fit a field whose rows carry `positions` (of the reference state) to `targets` (`outputs`
 /// values per Gaussian), applied to the dynamic set. `progress(done, total)` after each step.
