@@ -1,5 +1,6 @@
 //! `dlgs`: encode, inspect, decode and render `.dlgs` streams.
 
+mod ahac_bench_cmd;
 mod anchor_steps;
 mod cameras_arg;
 mod codec_args;
@@ -72,6 +73,10 @@ enum Cmd {
         /// Decodes per thread count (the median is reported).
         #[arg(long, default_value_t = 5)]
         repeat: usize,
+        /// Also fit a context model to each content's anchors at these steps (feature,
+        /// log-scaling, offsets), e.g. `0.057,0.18,0.18`, and time its fit and decode.
+        #[arg(long, value_name = "F,S,O")]
+        fit_steps: Option<String>,
     },
     /// Encode a splat scene (PLY, .splat, SPZ, PlayCanvas SOG) into a single-frame .dlgs
     /// (`--quality high` by default: 41-68 dB against the source on the real scenes;
@@ -285,7 +290,13 @@ fn main() -> Result<()> {
             ply,
             anchors,
             repeat,
-        } => hac_ingest_cmd::run_ahac_bench(&run, ply.as_deref(), anchors, repeat),
+            fit_steps,
+        } => {
+            let steps = fit_steps
+                .map(|s| scaffold_recode_cmd::parse_steps(&s))
+                .transpose()?;
+            ahac_bench_cmd::run_ahac_bench(&run, ply.as_deref(), anchors, repeat, steps)
+        }
         Cmd::Encode {
             input,
             fps,

@@ -32,7 +32,7 @@ fn has_raw_anchors(path: &Path) -> Result<bool> {
     Ok(false)
 }
 
-fn parse_steps(s: &str) -> Result<[f32; 3]> {
+pub(crate) fn parse_steps(s: &str) -> Result<[f32; 3]> {
     let v: Vec<f32> = crate::rd_cmd::list(s, "anchor-steps")?;
     match v.as_slice() {
         [f, s, o] if v.iter().all(|q| q.is_finite() && *q > 0.0) => Ok([*f, *s, *o]),

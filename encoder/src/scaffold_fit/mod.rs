@@ -43,10 +43,10 @@ impl ContextFitSettings {
     pub fn new(steps: [f32; 3]) -> Self {
         ContextFitSettings {
             steps,
-            iterations: 400,
+            iterations: 300,
             hidden: 16,
             grids: None,
-            batch: 8192,
+            batch: 2048,
             zstd_level: 19,
             seed: 0x00ac_0c7e_5eed,
         }

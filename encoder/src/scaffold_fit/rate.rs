@@ -48,8 +48,9 @@ pub struct SymbolRate {
 }
 
 /// `-log2 P(x)` with `P = Φ(b) - Φ(a)`, `a = ((x - ½)Q - μ)/σ`, `b = ((x + ½)Q - μ)/σ`, floored at
-/// 2^-24 (no gradient below the floor). `σ > 0`, `Q > 0`.
-pub fn symbol_rate(x: i32, q: f64, mu: f64, sigma: f64) -> SymbolRate {
+/// 2^-24 (no gradient below the floor). `σ > 0`, `Q > 0`. The bits themselves (a logarithm)
+/// only `with_bits`; otherwise `bits` is 0 (the gradient does not need them).
+pub fn symbol_rate(x: i32, q: f64, mu: f64, sigma: f64, with_bits: bool) -> SymbolRate {
     let a = ((x as f64 - 0.5) * q - mu) / sigma;
     let b = ((x as f64 + 0.5) * q - mu) / sigma;
     // The difference of the tail on the side away from the mean: no cancellation.
@@ -71,7 +72,11 @@ pub fn symbol_rate(x: i32, q: f64, mu: f64, sigma: f64) -> SymbolRate {
     // dP/dμ = (φ(a) - φ(b)) / σ, dP/dσ = (a φ(a) - b φ(b)) / σ; d(-log2 P) = -dP / (P ln 2).
     let k = -std::f64::consts::LOG2_E / (p * sigma);
     SymbolRate {
-        bits: -ln(p) * std::f64::consts::LOG2_E,
+        bits: if with_bits {
+            -ln(p) * std::f64::consts::LOG2_E
+        } else {
+            0.0
+        },
         d_mu: k * (fa - fb),
         d_sigma: k * (a * fa - b * fb),
     }
@@ -106,13 +111,13 @@ mod tests {
             (-2, 0.01, -0.013, 0.004),
             (7, 1.0, -1.0, 2.5),
         ] {
-            let r = symbol_rate(x, q, mu, sigma);
+            let r = symbol_rate(x, q, mu, sigma, true);
             let h = 1e-6 * sigma;
-            let dm = (symbol_rate(x, q, mu + h, sigma).bits
-                - symbol_rate(x, q, mu - h, sigma).bits)
+            let dm = (symbol_rate(x, q, mu + h, sigma, true).bits
+                - symbol_rate(x, q, mu - h, sigma, true).bits)
                 / (2.0 * h);
-            let ds = (symbol_rate(x, q, mu, sigma + h).bits
-                - symbol_rate(x, q, mu, sigma - h).bits)
+            let ds = (symbol_rate(x, q, mu, sigma + h, true).bits
+                - symbol_rate(x, q, mu, sigma - h, true).bits)
                 / (2.0 * h);
             assert!(
                 (dm - r.d_mu).abs() < 1e-3 * (1.0 + dm.abs()),
@@ -129,13 +134,13 @@ mod tests {
 
     #[test]
     fn a_centred_narrow_model_costs_almost_nothing_and_a_far_symbol_hits_the_floor() {
-        assert!(symbol_rate(0, 1.0, 0.0, 0.05).bits < 1e-6);
-        let far = symbol_rate(100, 1.0, 0.0, 0.5);
+        assert!(symbol_rate(0, 1.0, 0.0, 0.05, true).bits < 1e-6);
+        let far = symbol_rate(100, 1.0, 0.0, 0.5, true);
         assert!((far.bits - 24.0).abs() < 1e-9, "{}", far.bits);
         assert_eq!((far.d_mu, far.d_sigma), (0.0, 0.0));
         // Probabilities of all symbols sum to one.
         let total: f64 = (-40..=40)
-            .map(|x| 2f64.powf(-symbol_rate(x, 0.5, 0.3, 2.0).bits))
+            .map(|x| 2f64.powf(-symbol_rate(x, 0.5, 0.3, 2.0, true).bits))
             .sum();
         assert!((total - 1.0).abs() < 1e-5, "{total}");
     }

@@ -187,6 +187,7 @@ pub(super) fn fit(p: &Problem, s: &Schedule, progress: &mut dyn FnMut(usize, usi
         let lr_grid = 0.02 * 0.05f32.powf(frac);
         let lr_mlp = 0.01 * 0.05f32.powf(frac);
         let scale = 1.0 / ids.len() as f64;
+        let logged = it % 10 == 0 || it == s.iterations || it == 1;
         let block = ids.len().div_ceil(blocks_per_batch).max(1);
         let blocks: Vec<BlockGradients> = ids
             .par_chunks(block)
@@ -235,7 +236,8 @@ pub(super) fn fit(p: &Problem, s: &Schedule, progress: &mut dyn FnMut(usize, usi
                         let mu = p.shift[om] as f64 + p.unit[om] as f64 * ym as f64;
                         let sigma = p.unit[os] as f64 * ys as f64;
                         let floor = 0.05 * q;
-                        let r = symbol_rate(p.symbols[a][i * ch + c], q, mu, sigma.max(floor));
+                        let r =
+                            symbol_rate(p.symbols[a][i * ch + c], q, mu, sigma.max(floor), logged);
                         bits += r.bits;
                         let gm = (r.d_mu * p.unit[om] as f64 * scale) as f32;
                         let mut gs = (r.d_sigma * p.unit[os] as f64 * scale) as f32;
@@ -296,7 +298,7 @@ pub(super) fn fit(p: &Problem, s: &Schedule, progress: &mut dyn FnMut(usize, usi
         }
         adam_p.step(&mut params, &gp, lr_mlp, it);
         adam_l.step(&mut latent, &gl, lr_grid, it);
-        if it % 10 == 0 || it == s.iterations || it == 1 {
+        if logged {
             log.push((it, bits * scale));
         }
         progress(it, s.iterations);
