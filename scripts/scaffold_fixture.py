@@ -60,8 +60,13 @@ from safetensors.torch import save_file
 torch.set_num_threads(1)
 
 DATA = os.environ.get("DLGS_DATA", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
-SCENE = os.path.join(DATA, "ply", "supersplat_fruit_drops_minimal_4721_sh3.ply")
-LABELS = os.path.join(DATA, "ply", "supersplat_fruit_drops_minimal.annotations.json")
+# DLGS_FIXTURE_SCENE: another INRIA PLY (default the fruit scene). DLGS_FIXTURE_LABELS: its
+# annotations json (default: the fruit labels for the default scene, none for another scene; set but
+# empty: none). Without labels, the labels are GENERATED: the octant of each Gaussian centre about
+# the per-axis median (1..8), see load_scene. DLGS_FIXTURE_ANCHORS: target anchor count (2400).
+SCENE = os.environ.get("DLGS_FIXTURE_SCENE") or os.path.join(DATA, "ply", "supersplat_fruit_drops_minimal_4721_sh3.ply")
+LABELS = os.environ.get("DLGS_FIXTURE_LABELS", None if os.environ.get("DLGS_FIXTURE_SCENE")
+                        else os.path.join(DATA, "ply", "supersplat_fruit_drops_minimal.annotations.json")) or None
 SEED = 6666
 # `model.pth` (the reference's training checkpoint, 25 MB here: its grids as float32) is not
 # what the reference's decoder reads and is not committed; DLGS_FIXTURE_MODEL_PTH=1 writes it.
@@ -82,7 +87,7 @@ BATCH = 1000  # MAX_batch_size
 CHUNK = 10000  # chunk_size_cuda
 Q_BASE = {"feat": 1.0, "scaling": 0.001, "offsets": 0.2}
 PRIMES = (1, 2654435761, 805459861)
-TARGET_ANCHORS = 2400
+TARGET_ANCHORS = int(os.environ.get("DLGS_FIXTURE_ANCHORS", "2400"))
 SUBSET_STEP = 32  # neural_f64 stores the children of every 32nd anchor
 
 
@@ -266,9 +271,12 @@ def read_ply(path):
 
 def load_scene(rng):
     v = read_ply(SCENE)
-    ann = json.load(open(LABELS))["dataset"]["samples"][0]["labels"]
-    labels = np.array(next(iter(ann.values()))["attributes"]["point_annotations"], dtype=np.int64)
     xyz = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float64)
+    if LABELS:
+        ann = json.load(open(LABELS))["dataset"]["samples"][0]["labels"]
+        labels = np.array(next(iter(ann.values()))["attributes"]["point_annotations"], dtype=np.int64)
+    else:  # no labels: GENERATED label = 1 + octant of the centre about the per-axis median
+        labels = 1 + ((xyz > np.median(xyz, 0)) * np.array([1, 2, 4])).sum(1).astype(np.int64)
     rgb = np.clip(0.5 + 0.28209479177387814 * np.stack([v[f"f_dc_{c}"] for c in range(3)], 1), 0, 1)
     alpha = 1 / (1 + np.exp(-v["opacity"].astype(np.float64)))
     scale = np.exp(np.stack([v[f"scale_{a}"] for a in range(3)], 1).astype(np.float64))
@@ -283,6 +291,11 @@ def load_scene(rng):
 def voxelise(xyz, rng):
     """create_from_pcd: shuffle, unique(round(p/voxel))*voxel; voxel chosen for ~TARGET_ANCHORS."""
     lo, hi = 1e-4, 0.1
+    count = lambda vs: len(np.unique(np.round(xyz / vs), axis=0))
+    while count(hi) > TARGET_ANCHORS and hi < 1e6:  # widen the bracket for other scene sizes
+        hi *= 10
+    while count(lo) <= TARGET_ANCHORS and lo > 1e-9:
+        lo /= 10
     for _ in range(40):
         vs = math.sqrt(lo * hi)
         n = len(np.unique(np.round(xyz / vs), axis=0))
@@ -295,9 +308,14 @@ def voxelise(xyz, rng):
 def assign_targets(anchors, scene, voxel):
     """Child k of an anchor targets the k-th nearest scene Gaussian within 2.5 voxels; slots with
     none are 'off' (target colour opacity -0.5, so the decoder drops them)."""
-    d = np.linalg.norm(anchors[:, None, :] - scene["xyz"][None, :, :], axis=2)
-    order = np.argsort(d, axis=1)[:, :N_OFF]
-    on = np.take_along_axis(d, order, 1) < 2.5 * voxel
+    order, dk = [], []
+    step = max(1, int(2e7 // len(scene["xyz"])))  # rows per block (one block for the default scene)
+    for i in range(0, len(anchors), step):
+        d = np.linalg.norm(anchors[i:i + step, None, :] - scene["xyz"][None, :, :], axis=2)
+        order.append(np.argsort(d, axis=1)[:, :N_OFF])
+        dk.append(np.take_along_axis(d, order[-1], 1))
+    order = np.concatenate(order)
+    on = np.concatenate(dk) < 2.5 * voxel
     on[:, 0] = True  # every anchor came from at least one point
     return order, on
 
@@ -1143,8 +1161,11 @@ def main(root):
     total = time.time() - t_start
     prov = {
         "what": "FITTED DLGStream hac (Scaffold-GS + HAC) fixture in the reference layout (scripts/scaffold_fixture.py)",
-        "scene": "supersplat_fruit_drops_minimal_4721_sh3.ply (MIT, PlayCanvas) + its per-Gaussian labels",
-        "generated": "language code per label, choice of dynamic object, its rigid motion, GOP-1 colour/shape change",
+        "scene": ("supersplat_fruit_drops_minimal_4721_sh3.ply (MIT, PlayCanvas) + its per-Gaussian labels"
+                  if not os.environ.get("DLGS_FIXTURE_SCENE") and "DLGS_FIXTURE_LABELS" not in os.environ
+                  else os.path.basename(SCENE) + (" + labels " + os.path.basename(LABELS) if LABELS else " (no labels)")),
+        "generated": "language code per label, choice of dynamic object, its rigid motion, GOP-1 colour/shape change"
+                     + ("" if LABELS else "; labels = 1 + octant of the Gaussian centre about the per-axis median"),
         "fitted": "features/offsets/scalings, decoding MLPs, context model (mlp_grid + binary hash grids), "
                   "time features, deform MLPs, NTC",
         "versions": {"torch": torch.__version__, "numpy": np.__version__, "pandas": pd.__version__,

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use dlgs_encoder::scaffold_prior::DEFAULT_PRIOR_STEPS;
-use dlgs_encoder::scaffold_recode::{recode_anchors, RawAnchorCoding};
+use dlgs_encoder::scaffold_recode::{recode_anchors, RawAnchorCoding, RecodeOptions};
 use dlgs_render::{metrics, Camera, Image};
 
 use crate::cameras_arg::CameraArgs;
@@ -28,12 +28,21 @@ const LADDER: u32 = 20;
 /// 10 log10(3): the margin of each attribute's own search.
 const SHARE_DB: f64 = 4.771;
 
-/// One judged set of steps.
+/// Of the budget's error power, what the residual MLPs' rounding may take: 1 % (20 dB).
+const RNTC_MARGIN_DB: f64 = 20.0;
+/// Mantissa bits tried for the residual MLPs, fewest first.
+const RNTC_MANTISSAS: [u32; 8] = [0, 1, 2, 3, 4, 6, 8, 10];
+
+/// One judged set of steps (0: raw anchors kept) and residual MLP precision.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Judged {
     pub steps: [f32; 3],
+    pub rntc_mantissa: u32,
+    /// Mean PSNR over the judge renders (as `dlgs rd`).
     pub colour_db: f64,
     pub language_db: Option<f64>,
+    /// The lowest of the renders' PSNRs (colour and language together).
+    pub worst_db: f64,
 }
 
 impl Judged {
@@ -84,40 +93,50 @@ impl Judge {
         })
     }
 
-    /// Renders of the file with raw anchors coded by `coding`, against the uncoded ones.
-    pub fn judge(&mut self, coding: &RawAnchorCoding) -> Result<Judged> {
+    /// Renders of the file re-coded as `o` says, against the uncoded one.
+    pub fn judge(&mut self, o: &RecodeOptions) -> Result<Judged> {
         let f =
             File::open(&self.input).with_context(|| format!("opening {}", self.input.display()))?;
         let (bytes, _) = recode_anchors(
             BufReader::new(f),
-            1.0,
-            coding,
+            o,
             crate::hac_ingest_cmd::ZSTD_LEVEL,
             dlgs::Limits::default(),
             &mut |_, _| {},
         )?;
-        self.judge_bytes(&bytes, coding.steps())
+        self.judge_bytes(&bytes, o.raw.steps(), o.rntc_mantissa)
     }
 
     /// [`Self::judge`] of an already coded file.
-    pub fn judge_bytes(&mut self, bytes: &[u8], steps: [f32; 3]) -> Result<Judged> {
+    pub fn judge_bytes(
+        &mut self,
+        bytes: &[u8],
+        steps: [f32; 3],
+        rntc_mantissa: u32,
+    ) -> Result<Judged> {
         std::fs::write(&self.scratch, bytes)
             .with_context(|| format!("writing {}", self.scratch.display()))?;
         let mut test = Source::open(&self.scratch)?;
         let images = renders(&mut test, &self.times, &self.cams, self.language, false)?;
         let _ = std::fs::remove_file(&self.scratch);
-        let (mut colour, mut lang) = (0.0, 0.0);
+        let (mut colour, mut lang, mut worst) = (0.0, 0.0, f64::INFINITY);
         for (r, t) in self.reference.iter().zip(&images) {
-            colour += metrics::psnr(&r.color, &t.color);
+            let c = metrics::psnr(&r.color, &t.color);
+            colour += c;
+            worst = worst.min(c);
             if let (Some(x), Some(y)) = (&r.features, &t.features) {
-                lang += feature_psnr(x, y, self.peak);
+                let l = feature_psnr(x, y, self.peak);
+                lang += l;
+                worst = worst.min(l);
             }
         }
         let n = images.len().max(1) as f64;
         let j = Judged {
             steps,
+            rntc_mantissa,
             colour_db: colour / n,
             language_db: self.language.then_some(lang / n),
+            worst_db: worst,
         };
         self.judged.push(j);
         Ok(j)
@@ -131,18 +150,44 @@ fn ladder(a: usize, j: u32) -> f32 {
 
 /// The coarsest steps within `budget_db`; `progress(judged)` after each candidate.
 ///
-/// First each attribute on its own (half-octave rungs, the budget plus [`SHARE_DB`]), then the
+/// With anchor residuals (`rntc`), first the fewest mantissa bits of their MLPs' weights whose
+/// rounding alone keeps every judge render [`RNTC_MARGIN_DB`] above the budget (raw anchors
+/// kept); every later
+/// candidate has them. Then each attribute on its own (half-octave rungs, the budget plus [`SHARE_DB`]), then the
 /// three together (all a half-octave finer until they pass), then the slack is spent: each
 /// attribute in turn a quarter-octave coarser while the three still pass.
 pub fn choose(
     judge: &mut Judge,
     budget_db: f64,
+    rntc: bool,
     progress: &mut dyn FnMut(usize),
 ) -> Result<Judged> {
+    let mut rntc_mantissa = 23;
+    if rntc {
+        for m in RNTC_MANTISSAS {
+            let o = RecodeOptions {
+                k: 1.0,
+                raw: RawAnchorCoding::Keep,
+                rntc_mantissa: m,
+            };
+            let j = judge.judge(&o)?;
+            progress(judge.judged.len());
+            // Renders of GOPs without residuals are identical (inf): the worst render counts.
+            if j.worst_db >= budget_db + RNTC_MARGIN_DB {
+                rntc_mantissa = m;
+                break;
+            }
+        }
+    }
     let mut chosen = [0u32; 3];
     let mut try_steps = |judge: &mut Judge, c: [u32; 3]| -> Result<Judged> {
         let steps = std::array::from_fn(|a| ladder(a, c[a]));
-        let j = judge.judge(&RawAnchorCoding::Prior(steps))?;
+        let o = RecodeOptions {
+            k: 1.0,
+            raw: RawAnchorCoding::Prior(steps),
+            rntc_mantissa,
+        };
+        let j = judge.judge(&o)?;
         progress(judge.judged.len());
         Ok(j)
     };

@@ -14,18 +14,18 @@ use anyhow::{bail, Context, Result};
 use dlgs::container::{ChunkType, FileReader};
 use dlgs_encoder::scaffold_fit::ContextFitSettings;
 use dlgs_encoder::scaffold_prior::DEFAULT_PRIOR_STEPS;
-use dlgs_encoder::scaffold_recode::{recode_anchors, RawAnchorCoding};
+use dlgs_encoder::scaffold_recode::{recode_anchors, RawAnchorCoding, RecodeOptions};
 
 use crate::anchor_steps::{choose, Judge, Judged};
 use crate::codec_args::CodecArgs;
 use crate::pending_file::PendingFile;
 
-/// Whether any GOP of the file at `path` holds raw anchors (`ANCR`).
-fn has_raw_anchors(path: &Path) -> Result<bool> {
+/// Whether any GOP of the file at `path` holds a chunk of type `ty`.
+fn has_chunk(path: &Path, ty: ChunkType) -> Result<bool> {
     let f = File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let mut r = FileReader::open(BufReader::new(f))?;
     for g in 0..r.scene().gop_count {
-        if r.gop_chunks(g)?.iter().any(|c| c.ty == ChunkType::ANCR) {
+        if r.gop_chunks(g)?.iter().any(|c| c.ty == ty) {
             return Ok(true);
         }
     }
@@ -59,9 +59,10 @@ fn raw_coding(
     input: &Path,
     output: &Path,
     codec: &CodecArgs,
-) -> Result<(RawAnchorCoding, Option<Searched>)> {
+) -> Result<(RecodeOptions, Option<Searched>)> {
     let k = codec.anchor_step_scale;
     let mut searched = None;
+    let mut rntc_mantissa = 23;
     let steps = match &codec.anchor_steps {
         Some(s) => parse_steps(s)?,
         None if codec.anchor_prior || k != 1.0 => DEFAULT_PRIOR_STEPS.map(|q| q * k),
@@ -74,16 +75,18 @@ fn raw_coding(
             let scratch = output.with_file_name(format!(".{name}.steps.dlgs"));
             let mut judge = Judge::new(input, &scratch)?;
             let b = bar(0, "anchor step candidates judged");
-            let j = choose(&mut judge, codec.anchor_budget_db, &mut |n| {
+            let rntc = has_chunk(input, ChunkType::RNTC)?;
+            let j = choose(&mut judge, codec.anchor_budget_db, rntc, &mut |n| {
                 b.set_length(n as u64);
                 b.set_position(n as u64);
             })?;
             b.finish_and_clear();
             searched = Some((j, judge.judged.len(), t0.elapsed().as_secs_f64()));
+            rntc_mantissa = j.rntc_mantissa;
             j.steps
         }
     };
-    let coding = if codec.anchor_prior {
+    let raw = if codec.anchor_prior {
         RawAnchorCoding::Prior(steps)
     } else {
         RawAnchorCoding::Fitted(ContextFitSettings {
@@ -91,19 +94,25 @@ fn raw_coding(
             ..ContextFitSettings::new(steps)
         })
     };
-    Ok((coding, searched))
+    let o = RecodeOptions {
+        k,
+        raw,
+        rntc_mantissa,
+    };
+    Ok((o, searched))
 }
 
 pub fn run(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> {
     let k = codec.anchor_step_scale;
-    let raw = has_raw_anchors(input)?;
-    let (coding, searched) = if raw {
+    let (o, searched) = if has_chunk(input, ChunkType::ANCR)? {
         raw_coding(input, output, codec)?
     } else {
-        (
-            RawAnchorCoding::Prior(DEFAULT_PRIOR_STEPS.map(|q| q * k)),
-            None,
-        )
+        let o = RecodeOptions {
+            k,
+            raw: RawAnchorCoding::Prior(DEFAULT_PRIOR_STEPS.map(|q| q * k)),
+            rntc_mantissa: 23,
+        };
+        (o, None)
     };
     let f = File::open(input).with_context(|| format!("opening {}", input.display()))?;
     let in_bytes = f.metadata().map(|m| m.len()).unwrap_or(0);
@@ -111,8 +120,7 @@ pub fn run(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> {
     let t0 = Instant::now();
     let (bytes, report) = recode_anchors(
         BufReader::new(f),
-        k,
-        &coding,
+        &o,
         crate::hac_ingest_cmd::ZSTD_LEVEL,
         dlgs::Limits::default(),
         &mut |done, total| {
@@ -139,7 +147,7 @@ pub fn run(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> {
         report.ahac_bytes_after,
     );
     if report.from_raw > 0 {
-        let steps = coding.steps();
+        let steps = o.raw.steps();
         match &searched {
             Some((j, n, s)) => println!(
                 "raw anchors of {} GOP(s): steps {steps:?} (feature, log-scaling, offsets), the \
@@ -174,6 +182,16 @@ pub fn run(input: &Path, output: &Path, codec: &CodecArgs) -> Result<()> {
                 fit.sizes.mlp,
                 fit.mantissa_bits,
                 fit.sizes.streams.iter().sum::<usize>(),
+            );
+        }
+        if report.rntc_chunks > 0 {
+            println!(
+                "anchor residuals (RNTC) of {} GOP(s): MLP weights at {} mantissa bits, {} -> {} \
+                 bytes",
+                report.rntc_chunks,
+                o.rntc_mantissa,
+                report.rntc_bytes_before,
+                report.rntc_bytes_after
             );
         }
         println!("anchors coded in {coding_s:.1} s");

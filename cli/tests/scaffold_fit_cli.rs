@@ -55,8 +55,8 @@ fn psnr_against(a: &str, b: &str, t: &str) -> f64 {
 }
 
 /// The default: at most the trained HAC model's 98.6 kB for GOP 0's anchors, within the
-/// 45 dB budget on the judge views, and on the fixture's own cameras too; smaller than the
-/// prior at the same steps.
+/// 45 dB budget on the judge views, and on the fixture's own cameras too (GOP 1 at t = 2.5 s,
+/// with its residual MLP rounded); smaller than the prior at the same steps.
 #[test]
 fn raw_anchors_get_searched_steps_and_a_fitted_context_model() {
     let dir = tempfile::tempdir().unwrap();
@@ -90,6 +90,20 @@ fn raw_anchors_get_searched_steps_and_a_fitted_context_model() {
         .find(|l| l.contains("context model fitted"))
         .expect("a fit report");
     assert!(!line.contains("the prior was kept"), "{line}");
+    // GOP 1's anchor residual: its MLP weights at fewer mantissa bits, smaller.
+    let rntc = text
+        .lines()
+        .find(|l| l.starts_with("anchor residuals (RNTC) of 1 GOP(s)"))
+        .expect("an RNTC report");
+    let sizes: Vec<u64> = rntc
+        .split(", ")
+        .nth(1)
+        .unwrap()
+        .trim_end_matches(" bytes")
+        .split(" -> ")
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(sizes[1] < sizes[0], "{rntc}");
     for t in ["0.5", "2.5"] {
         let psnr = psnr_against(&path("raw.dlgs"), &path("fit.dlgs"), t);
         println!("t = {t}: {psnr:.2} dB against the raw file");

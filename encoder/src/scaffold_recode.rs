@@ -10,17 +10,32 @@
 
 use std::io::{Read, Seek};
 
-use dlgs::chunks::{ahac, ancr};
+use dlgs::chunks::{ahac, ancr, rntc};
 use dlgs::container::header::Variant;
 use dlgs::container::{ChunkType, FileReader, Writer};
 use dlgs::{Error, Limits, Result};
 
+use crate::mantissa::round_mantissa;
 use crate::scaffold_fit::{fit_anchors, ContextFitReport, ContextFitSettings};
 use crate::scaffold_prior::{prior_anchors, DEFAULT_PRIOR_STEPS};
+
+/// What [`recode_anchors`] changes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecodeOptions {
+    /// `AHAC` steps times this (1: the same symbols).
+    pub k: f32,
+    /// How raw (`ANCR`) anchors are coded.
+    pub raw: RawAnchorCoding,
+    /// Mantissa bits kept in the weights of every anchor residual's (`RNTC`) MLP (23: all, the
+    /// chunks are copied as they are).
+    pub rntc_mantissa: u32,
+}
 
 /// How raw (`ANCR`) anchors are HAC-coded.
 #[derive(Debug, Clone, PartialEq)]
 pub enum RawAnchorCoding {
+    /// Left raw (`ANCR` copied).
+    Keep,
     /// The per-channel prior at these steps (feature, log-scaling, offsets): fast.
     Prior([f32; 3]),
     /// A context model fitted to each GOP's anchors (its steps are the settings').
@@ -28,9 +43,10 @@ pub enum RawAnchorCoding {
 }
 
 impl RawAnchorCoding {
-    /// The steps raw anchors are quantised with.
+    /// The steps raw anchors are quantised with (0: kept raw).
     pub fn steps(&self) -> [f32; 3] {
         match self {
+            RawAnchorCoding::Keep => [0.0; 3],
             RawAnchorCoding::Prior(s) => *s,
             RawAnchorCoding::Fitted(f) => f.steps,
         }
@@ -49,6 +65,10 @@ pub struct RecodeReport {
     pub ahac_bytes_after: u64,
     /// Per raw GOP coded with a fitted model: what the fit reached.
     pub fits: Vec<ContextFitReport>,
+    /// `RNTC` chunks whose MLP weights were rounded, and their payload bytes before and after.
+    pub rntc_chunks: usize,
+    pub rntc_bytes_before: u64,
+    pub rntc_bytes_after: u64,
 }
 
 /// `META` with `settings.anchor_step_scale` multiplied by `k` (the steps are now `k` times
@@ -83,20 +103,24 @@ pub fn recode_anchor_steps<R: Read + Seek>(
     zstd_level: i32,
     limits: Limits,
 ) -> Result<(Vec<u8>, RecodeReport)> {
-    let raw = RawAnchorCoding::Prior(DEFAULT_PRIOR_STEPS.map(|q| q * k));
-    recode_anchors(src, k, &raw, zstd_level, limits, &mut |_, _| {})
+    let o = RecodeOptions {
+        k,
+        raw: RawAnchorCoding::Prior(DEFAULT_PRIOR_STEPS.map(|q| q * k)),
+        rntc_mantissa: 23,
+    };
+    recode_anchors(src, &o, zstd_level, limits, &mut |_, _| {})
 }
 
-/// [`recode_anchor_steps`] with raw anchors coded as `raw` says. `progress(done, total)`
-/// reports the fits' iterations, over all raw GOPs.
+/// [`recode_anchor_steps`] with raw anchors coded and residual MLPs rounded as `o` says.
+/// `progress(done, total)` reports the fits' iterations of each raw GOP.
 pub fn recode_anchors<R: Read + Seek>(
     src: R,
-    k: f32,
-    raw: &RawAnchorCoding,
+    o: &RecodeOptions,
     zstd_level: i32,
     limits: Limits,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<u8>, RecodeReport)> {
+    let (k, raw) = (o.k, &o.raw);
     if !(k.is_finite() && k > 0.0) {
         return Err(Error::input(format!(
             "anchor step scale {k}: a finite number > 0"
@@ -129,17 +153,33 @@ pub fn recode_anchors<R: Read + Seek>(
                     let (h, _) = ahac::decode_full(&p, c.payload_offset(), &scene, &limits)?;
                     h.requantized(k)?
                 }
-                ChunkType::ANCR => {
+                ChunkType::ANCR if *raw != RawAnchorCoding::Keep => {
                     let anchors = ancr::decode(&p, c.payload_offset(), &scene, &limits)?;
                     report.from_raw += 1;
                     match raw {
-                        RawAnchorCoding::Prior(steps) => prior_anchors(&anchors, *steps)?,
+                        RawAnchorCoding::Keep | RawAnchorCoding::Prior(_) => {
+                            prior_anchors(&anchors, raw.steps())?
+                        }
                         RawAnchorCoding::Fitted(settings) => {
                             let (hac, fit) = fit_anchors(&anchors, settings, &mut *progress)?;
                             report.fits.push(fit);
                             hac
                         }
                     }
+                }
+                ChunkType::RNTC if o.rntc_mantissa < 23 => {
+                    let mut f = rntc::decode(&p, c.payload_offset(), &scene, &limits)?;
+                    let m = &mut f.mlp;
+                    for v in [&mut m.w1, &mut m.b1, &mut m.w2, &mut m.b2] {
+                        v.iter_mut()
+                            .for_each(|x| *x = round_mantissa(*x, o.rntc_mantissa));
+                    }
+                    let q = rntc::encode(&f, &scene, zstd_level)?;
+                    report.rntc_chunks += 1;
+                    report.rntc_bytes_before += p.len() as u64;
+                    report.rntc_bytes_after += q.len() as u64;
+                    w.gop_chunk(c.ty, c.flags, &q)?;
+                    continue;
                 }
                 _ => {
                     w.gop_chunk(c.ty, c.flags, &p)?;

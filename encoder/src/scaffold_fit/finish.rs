@@ -6,21 +6,7 @@ use bitvec::prelude::*;
 use dlgs::model::hac_context::{HacContext, CONTEXT_OUT};
 
 use super::train::{Problem, Trained, TRAINED_OUT};
-
-/// `v` rounded to `bits` mantissa bits (nearest, ties away from zero); 23 keeps it.
-fn round_mantissa(v: f32, bits: u32) -> f32 {
-    if bits >= 23 || !v.is_finite() {
-        return v;
-    }
-    let drop = 23 - bits;
-    let half = 1u32 << (drop - 1);
-    let r = f32::from_bits((v.to_bits() + half) & !((1u32 << drop) - 1));
-    if r.is_finite() {
-        r
-    } else {
-        v
-    }
-}
+use crate::mantissa::round_mantissa;
 
 /// The context model of `t` (box and steps from `prior`), weights at `mantissa` bits. The
 /// output biases keep every bit: they carry the channels' means at the steps' precision.
@@ -71,20 +57,5 @@ pub(super) fn context(t: &Trained, p: &Problem, prior: &HacContext, mantissa: u3
         b1: t.b1.iter().map(|&w| round_mantissa(w, mantissa)).collect(),
         w2,
         b2,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::round_mantissa;
-
-    #[test]
-    fn rounding_keeps_the_leading_bits_and_rounds_to_nearest() {
-        assert_eq!(round_mantissa(1.0, 8), 1.0);
-        assert_eq!(round_mantissa(-3.5, 4), -3.5);
-        let v = 1.0 + 1.0 / 512.0 + 1.0 / 1024.0; // above the midpoint of two 8-bit values
-        assert_eq!(round_mantissa(v, 8), 1.0 + 1.0 / 256.0);
-        assert_eq!(round_mantissa(0.1, 23), 0.1);
-        assert_eq!(round_mantissa(f32::MAX, 4), f32::MAX);
     }
 }
