@@ -26,6 +26,17 @@ fn ok(o: &std::process::Output) -> String {
     text
 }
 
+/// The fixture run with GOP 0's anchors raw (`ANCR`) at `out`.
+fn raw_file(out: &str) {
+    ok(&run(&[
+        "encode",
+        fixture().to_str().unwrap(),
+        "-o",
+        out,
+        "--raw-anchors",
+    ]));
+}
+
 /// Payload bytes of chunk type `ty` in `dlgs info`'s table.
 fn chunk_bytes(file: &str, ty: &str) -> u64 {
     let info = ok(&run(&["info", file]));
@@ -61,13 +72,7 @@ fn psnr_against(a: &str, b: &str, t: &str) -> f64 {
 fn raw_anchors_get_searched_steps_and_a_fitted_context_model() {
     let dir = tempfile::tempdir().unwrap();
     let path = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
-    ok(&run(&[
-        "encode",
-        fixture().to_str().unwrap(),
-        "-o",
-        &path("raw.dlgs"),
-        "--raw-anchors",
-    ]));
+    raw_file(&path("raw.dlgs"));
     let text = ok(&run(&[
         "encode",
         &path("raw.dlgs"),
@@ -135,13 +140,7 @@ fn raw_anchors_get_searched_steps_and_a_fitted_context_model() {
 fn explicit_anchor_steps_are_used_and_checked() {
     let dir = tempfile::tempdir().unwrap();
     let path = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
-    ok(&run(&[
-        "encode",
-        fixture().to_str().unwrap(),
-        "-o",
-        &path("raw.dlgs"),
-        "--raw-anchors",
-    ]));
+    raw_file(&path("raw.dlgs"));
     let text = ok(&run(&[
         "encode",
         &path("raw.dlgs"),
