@@ -108,12 +108,7 @@ impl Judge {
     }
 
     /// [`Self::judge`] of an already coded file.
-    pub fn judge_bytes(
-        &mut self,
-        bytes: &[u8],
-        steps: [f32; 3],
-        rntc_mantissa: u32,
-    ) -> Result<Judged> {
+    fn judge_bytes(&mut self, bytes: &[u8], steps: [f32; 3], rntc_mantissa: u32) -> Result<Judged> {
         std::fs::write(&self.scratch, bytes)
             .with_context(|| format!("writing {}", self.scratch.display()))?;
         let mut test = Source::open(&self.scratch)?;

@@ -14,7 +14,7 @@ pub mod grid_sort;
 pub mod importance;
 pub mod invisible;
 pub mod judge_views;
-pub mod mantissa;
+mod mantissa;
 pub mod orientation;
 pub mod quality_search;
 mod refit_stage;

@@ -156,15 +156,12 @@ pub fn recode_anchors<R: Read + Seek>(
                 ChunkType::ANCR if *raw != RawAnchorCoding::Keep => {
                     let anchors = ancr::decode(&p, c.payload_offset(), &scene, &limits)?;
                     report.from_raw += 1;
-                    match raw {
-                        RawAnchorCoding::Keep | RawAnchorCoding::Prior(_) => {
-                            prior_anchors(&anchors, raw.steps())?
-                        }
-                        RawAnchorCoding::Fitted(settings) => {
-                            let (hac, fit) = fit_anchors(&anchors, settings, &mut *progress)?;
-                            report.fits.push(fit);
-                            hac
-                        }
+                    if let RawAnchorCoding::Fitted(settings) = raw {
+                        let (hac, fit) = fit_anchors(&anchors, settings, &mut *progress)?;
+                        report.fits.push(fit);
+                        hac
+                    } else {
+                        prior_anchors(&anchors, raw.steps())?
                     }
                 }
                 ChunkType::RNTC if o.rntc_mantissa < 23 => {

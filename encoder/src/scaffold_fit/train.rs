@@ -128,10 +128,7 @@ pub(super) fn fit(p: &Problem, s: &Schedule, progress: &mut dyn FnMut(usize, usi
     let ni: usize = layout.iter().map(|l| l.1).sum();
     let nh = s.hidden;
     let no = TRAINED_OUT;
-    let latent_len = layout.last().map_or(0, |l| l.0) + {
-        let bits = HacContext::level_bits(p.grid3, p.grid2);
-        bits.last().copied().unwrap_or(0)
-    };
+    let latent_len: usize = HacContext::level_bits(p.grid3, p.grid2).iter().sum();
     let mut rng = fastrand::Rng::with_seed(s.seed);
     let mut latent: Vec<f32> = (0..latent_len).map(|_| (rng.f32() - 0.5) * 0.2).collect();
     let mut touched = vec![false; latent_len];
